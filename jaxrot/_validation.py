@@ -1,0 +1,152 @@
+"""Eager input checks: a clear ``ValueError`` before anything compiles.
+
+Shape checks always run (shapes are static, even under ``jit``). Value checks
+(finite, unit norm, positive definite, …) run only on concrete arrays; on
+tracers they are skipped, never wrong.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._state import RotState
+
+
+QUATERNION_NORM_TOL = 1e-6
+
+
+def is_concrete(*xs) -> bool:
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
+
+
+def float_dtype(*xs):
+    """The floating dtype results are computed in: that of the inputs, or JAX's default."""
+    dtype = jnp.result_type(*xs)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    return dtype
+
+
+def check_state(state, *, normalize=False, name="state") -> RotState:
+    """Validate and convert a `RotState`; returns one with arrays of a common float dtype."""
+    if not (isinstance(state, tuple) and len(state) == 2):
+        raise ValueError(f"`{name}` must be jaxrot.RotState(q, omega); got {type(state).__name__}.")
+    q, omega = (jnp.asarray(x) for x in state)
+    if q.ndim < 1 or q.shape[-1] != 4:
+        raise ValueError(f"`{name}.q` must have shape (..., 4) (scalar-first [w, x, y, z]); got {q.shape}.")
+    if omega.ndim < 1 or omega.shape[-1] != 3:
+        raise ValueError(f"`{name}.omega` must have shape (..., 3) (world frame); got {omega.shape}.")
+    if q.shape[:-1] != omega.shape[:-1]:
+        raise ValueError(
+            f"`{name}.q` and `{name}.omega` must share their leading (particle) axes; "
+            f"got {q.shape[:-1]} and {omega.shape[:-1]}."
+        )
+    dtype = float_dtype(q, omega)
+    q, omega = q.astype(dtype), omega.astype(dtype)
+    if is_concrete(q, omega):
+        for label, x in (("q", q), ("omega", omega)):
+            if not np.all(np.isfinite(np.asarray(x))):
+                raise ValueError(f"`{name}.{label}` contains NaN or infinite values.")
+        norms = np.linalg.norm(np.asarray(q, dtype=np.float64), axis=-1)
+        if np.any(norms == 0):
+            raise ValueError(f"`{name}.q` contains a zero quaternion, which is not a rotation.")
+        if not normalize:
+            worst = float(np.max(np.abs(norms - 1))) if norms.size else 0.0
+            if worst > QUATERNION_NORM_TOL:
+                raise ValueError(
+                    f"`{name}.q` must be unit quaternions (| |q| - 1 | <= {QUATERNION_NORM_TOL:g}); "
+                    f"the worst is off by {worst:.3g}. Normalise it "
+                    "(jaxrot.quaternion.normalize) or pass normalize=True."
+                )
+    if normalize:
+        q = q / jnp.linalg.norm(q, axis=-1, keepdims=True)
+    return RotState(q, omega)
+
+
+def check_inertia(inertia, batch_shape, dtype, name="inertia"):
+    """Validate an inertia for particles with leading shape ``batch_shape``.
+
+    Returns ``(inertia, per_particle)``; the accepted shapes, in the order they
+    are matched, are ``batch + (3, 3)``, ``(3, 3)``, ``batch + (3,)``, ``(3,)``.
+    """
+    inertia = jnp.asarray(inertia)
+    batch_shape = tuple(batch_shape)
+    shape = inertia.shape
+    if shape == (*batch_shape, 3, 3) and batch_shape:
+        per_particle = True
+    elif shape == (3, 3) or shape == (3,):
+        per_particle = False
+    elif shape == (*batch_shape, 3):
+        per_particle = True
+    else:
+        raise ValueError(
+            f"`{name}` must be principal moments (3,) or a full body-frame tensor (3, 3), shared, "
+            f"or one per particle with the particle axes {batch_shape} in front; got shape {shape}."
+        )
+    inertia = inertia.astype(dtype)
+    if is_concrete(inertia):
+        check_inertia_values(np.asarray(inertia, dtype=np.float64), name)
+    return inertia, per_particle
+
+
+def check_inertia_values(inertia: np.ndarray, name="inertia"):
+    if not np.all(np.isfinite(inertia)):
+        raise ValueError(f"`{name}` contains NaN or infinite values.")
+    if inertia.shape[-2:] == (3, 3):
+        scale = np.max(np.abs(inertia), axis=(-2, -1), keepdims=True)
+        asym = np.max(np.abs(inertia - np.swapaxes(inertia, -1, -2)) / np.where(scale > 0, scale, 1))
+        if asym > 1e-6:
+            raise ValueError(
+                f"`{name}` must be a symmetric tensor; the largest relative asymmetry is {asym:.3g}. "
+                "Pass (I + I.T) / 2 if the asymmetry is round-off."
+            )
+        moments = np.linalg.eigvalsh(0.5 * (inertia + np.swapaxes(inertia, -1, -2)))
+    else:
+        moments = inertia
+    if np.any(moments <= 0):
+        raise ValueError(
+            f"`{name}` must be positive definite (every principal moment > 0); "
+            f"the smallest principal moment is {float(np.min(moments)):.3g}."
+        )
+    # A real mass distribution has I_i + I_j >= I_k for every permutation.
+    total = np.sum(moments, axis=-1, keepdims=True)
+    slack = np.min(total - 2 * moments)
+    if slack < -1e-6 * float(np.max(total)):
+        raise ValueError(
+            f"`{name}` violates the triangle inequality I1 + I2 >= I3 (for every permutation) that "
+            f"every real mass distribution satisfies; worst margin {slack:.3g}. Check the moments."
+        )
+
+
+def check_dt(dt, name="dt"):
+    dt_arr = jnp.asarray(dt)
+    if dt_arr.ndim != 0:
+        raise ValueError(f"`{name}` must be a scalar time step; got shape {dt_arr.shape}.")
+    if is_concrete(dt_arr):
+        value = float(dt_arr)
+        if not np.isfinite(value) or value <= 0:
+            raise ValueError(f"`{name}` must be a finite time step > 0; got {value}.")
+    return dt_arr
+
+
+def check_count(value, name, minimum):
+    if (
+        isinstance(value, jax.core.Tracer)
+        or not isinstance(value, (int, np.integer))
+        or isinstance(value, bool)
+    ):
+        raise ValueError(
+            f"`{name}` must be a Python int (it fixes array shapes, so it cannot be traced); "
+            f"got {type(value).__name__}."
+        )
+    if value < minimum:
+        raise ValueError(f"`{name}` must be >= {minimum}; got {value}.")
+    return int(value)
+
+
+def check_torque(torque):
+    if torque is not None and not callable(torque):
+        raise ValueError(
+            "`torque` must be None (torque-free) or a callable torque(t, q, omega, args) -> (3,) "
+            f"world-frame torque; got {type(torque).__name__}."
+        )

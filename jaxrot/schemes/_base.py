@@ -1,0 +1,60 @@
+"""The small interface every scheme implements.
+
+A scheme advances **one body**; `jaxrot.rollout` vmaps it over particles and
+scans it over time. A scheme may carry more than `RotState` between steps (a
+momentum, a reused torque): `init` builds that carry, `step` advances it and
+`state` reads the `RotState` back out.
+"""
+
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .. import quaternion as quat
+from .._inertia import BodyInertia
+from .._state import RotState
+
+
+Torque = Callable[[jax.Array, jax.Array, jax.Array, Any], jax.Array]
+
+
+class AbstractScheme(eqx.Module):
+    """Base class of the integrators in `jaxrot.SCHEMES`.
+
+    Class attributes:
+        name: the key in `jaxrot.SCHEMES`.
+        order: nominal global order of accuracy in ``dt``.
+        torque_evals_per_step: calls of the torque callable per step (0 when
+            ``torque=None``, which is never called).
+    """
+
+    name: ClassVar[str]
+    order: ClassVar[int]
+    torque_evals_per_step: ClassVar[int]
+
+    def init(self, state: RotState, t0, inertia: BodyInertia, torque: Torque | None, args) -> Any:
+        """Carry for the first step; the plain state unless the scheme needs more."""
+        return state
+
+    def step(self, carry, t, dt, inertia: BodyInertia, torque: Torque | None, args) -> Any:
+        """Advance one body from time ``t`` to ``t + dt``."""
+        raise NotImplementedError
+
+    def state(self, carry) -> RotState:
+        """The `RotState` held in a carry."""
+        return carry
+
+
+def body_torque(torque: Torque | None, t, q, omega, args, dtype):
+    """Torque in the body frame of ``q``; None when the scene is torque-free."""
+    if torque is None:
+        return None
+    tau = jnp.asarray(torque(t, q, omega, args)).astype(dtype)
+    if tau.shape != (3,):
+        raise ValueError(
+            f"`torque` must return a world-frame torque of shape (3,) for one body; got {tau.shape}."
+        )
+    return quat.rotate(quat.conjugate(q), tau)

@@ -1,0 +1,104 @@
+"""Every bad input of DESIGN.md gets a ValueError naming the argument; tracers are never checked."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import MOMENTS, principal_state
+
+import jaxrot
+
+
+GOOD = principal_state()
+Q, OMEGA = GOOD
+
+
+def run(state=GOOD, inertia=MOMENTS, dt=0.01, n_steps=3, **kwargs):
+    return jaxrot.rollout(kwargs.pop("scheme", "zhao"), state, inertia, dt, n_steps, **kwargs)
+
+
+BAD_INPUTS = {
+    "q wrong trailing shape": (dict(state=jaxrot.RotState(Q[:3], OMEGA)), r"state\.q.*\(\.\.\., 4\)"),
+    "omega wrong trailing shape": (
+        dict(state=jaxrot.RotState(Q, jnp.zeros(4))),
+        r"state\.omega.*\(\.\.\., 3\)",
+    ),
+    "particle axes differ": (
+        dict(state=jaxrot.RotState(jnp.stack([Q, Q]), OMEGA)),
+        "share their leading",
+    ),
+    "state not a RotState": (dict(state=Q), "RotState"),
+    "q NaN": (dict(state=jaxrot.RotState(Q.at[0].set(jnp.nan), OMEGA)), r"state\.q.*NaN"),
+    "omega infinite": (dict(state=jaxrot.RotState(Q, OMEGA.at[1].set(jnp.inf))), r"state\.omega.*infinite"),
+    "q not unit": (dict(state=jaxrot.RotState(Q * (1 + 1e-4), OMEGA)), r"state\.q.*normalize=True"),
+    "q zero": (dict(state=jaxrot.RotState(jnp.zeros(4), OMEGA)), "zero quaternion"),
+    "inertia wrong shape": (dict(inertia=jnp.ones(4)), r"inertia.*\(3,\).*\(3, 3\)"),
+    "inertia per-particle shape mismatch": (dict(inertia=jnp.ones((2, 3))), r"inertia.*particle axes"),
+    "inertia NaN": (dict(inertia=MOMENTS.at[0].set(jnp.nan)), "inertia.*NaN"),
+    "inertia not symmetric": (dict(inertia=jnp.diag(MOMENTS).at[0, 1].set(0.1)), "inertia.*symmetric"),
+    "inertia not positive definite": (
+        dict(inertia=jnp.array([-1.0, 2.0, 2.0])),
+        "inertia.*positive definite",
+    ),
+    "inertia zero moment": (dict(inertia=jnp.array([0.0, 1.0, 1.0])), "inertia.*positive definite"),
+    "inertia tensor indefinite": (
+        dict(inertia=jnp.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 2.0]])),
+        "inertia.*positive definite",
+    ),
+    "inertia triangle inequality": (dict(inertia=jnp.array([1.0, 1.0, 3.0])), "inertia.*triangle inequality"),
+    "dt zero": (dict(dt=0.0), r"dt.*> 0"),
+    "dt negative": (dict(dt=-0.1), r"dt.*> 0"),
+    "dt NaN": (dict(dt=float("nan")), r"dt.*finite"),
+    "dt not scalar": (dict(dt=jnp.array([0.1, 0.2])), r"dt.*scalar"),
+    "n_steps negative": (dict(n_steps=-1), r"n_steps.*>= 0"),
+    "n_steps float": (dict(n_steps=2.5), r"n_steps.*Python int"),
+    "save_every zero": (dict(save_every=0), r"save_every.*>= 1"),
+    "unknown scheme": (dict(scheme="rk4"), r"scheme.*'zhao'"),
+    "torque not callable": (dict(torque=jnp.zeros(3)), r"torque.*callable"),
+    "t0 not scalar": (dict(t0=jnp.zeros(2)), r"t0.*scalar"),
+}
+
+
+@pytest.mark.parametrize("kwargs, match", BAD_INPUTS.values(), ids=BAD_INPUTS.keys())
+def test_bad_input_raises_value_error_naming_the_argument(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        run(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs, match", list(BAD_INPUTS.values())[:16], ids=list(BAD_INPUTS)[:16])
+def test_reference_rollout_checks_state_and_inertia_the_same_way(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jaxrot.reference_rollout(
+            kwargs.get("state", GOOD), kwargs.get("inertia", MOMENTS), jnp.array([0.0, 0.1])
+        )
+
+
+def test_torque_of_wrong_shape_is_reported():
+    with pytest.raises(ValueError, match=r"torque.*shape \(3,\)"):
+        run(torque=lambda t, q, omega, args: jnp.zeros(2))
+
+
+def test_n_steps_traced_is_rejected_clearly():
+    with pytest.raises(ValueError, match=r"n_steps.*Python int"):
+        jax.jit(lambda n: run(n_steps=n))(3)
+
+
+def test_checks_skip_tracers_under_jit_and_grad():
+    """A non-unit q or a non-physical inertia under jit is the caller's business: no check, no error."""
+    off_unit = jaxrot.RotState(Q * 1.5, OMEGA)
+    out = jax.jit(lambda s, inertia: run(state=s, inertia=inertia))(off_unit, jnp.array([1.0, 1.0, 3.0]))
+    assert bool(jnp.all(jnp.isfinite(out.q)))
+
+    def loss(inertia, dt):
+        return jnp.sum(run(inertia=inertia, dt=dt).omega[-1])
+
+    grads = jax.grad(loss, argnums=(0, 1))(MOMENTS, 0.01)
+    assert all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
+    grads_full = jax.grad(loss)(jnp.diag(MOMENTS), 0.01)
+    assert bool(jnp.all(jnp.isfinite(grads_full)))
+
+
+def test_integer_and_list_inputs_are_converted_to_float():
+    traj = jaxrot.rollout("zhao", jaxrot.RotState([1, 0, 0, 0], [0, 0, 1]), [1, 2, 2], 0.1, 2)
+    assert jnp.issubdtype(traj.q.dtype, jnp.floating)
+    np.testing.assert_allclose(traj.omega[-1], [0.0, 0.0, 1.0], atol=1e-15)
