@@ -97,7 +97,7 @@ def compare(scene="heavy_top", *, t_end=None, coarse_steps=100, levels=6, repeat
                 "n_steps": n_steps,
                 "max_orientation_error_rad": orientation_error(traj.q, ref.q),
                 "final_omega_error": float(jnp.linalg.norm(traj.omega[-1] - ref.omega[-1])),
-                "torque_evals": scheme.torque_evals_per_step * n_steps,
+                "torque_evals": scheme.torque_evals_per_step * n_steps + scheme.torque_evals_at_init,
                 "us_per_step": seconds_per_step * 1e6,
                 "compile_s": compile_s,
             }

@@ -26,8 +26,7 @@ def _vector_field(t, y, ctx):
         omega = quat.rotate(q_unit, omega_b)
         tau = jnp.asarray(torque(t, q_unit, omega, args)).astype(q.dtype)
         tau_b = quat.rotate(quat.conjugate(q_unit), tau)
-    omega_quat = jnp.concatenate([jnp.zeros((1,), q.dtype), omega_b])
-    q_dot = 0.5 * quat.multiply(q, omega_quat)
+    q_dot = 0.5 * quat.multiply(q, quat.pure(omega_b))
     return q_dot, inertia.angular_acceleration(omega_b, tau_b)
 
 

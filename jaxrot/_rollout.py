@@ -1,12 +1,15 @@
 """`rollout`: one `lax.scan` over time, `vmap` over particles."""
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._drive import check_drive, driven_step, driven_torque
 from ._inertia import body_inertia
 from ._state import RotState, Trajectory
-from ._validation import check_count, check_dt, check_inertia, check_state, check_torque
+from ._validation import check_count, check_dt, check_inertia, check_state, check_torque, is_concrete
 from .schemes import resolve_scheme
 
 
@@ -21,8 +24,10 @@ def rollout(
     args=None,
     save_every: int = 1,
     t0=0.0,
+    drive=None,
     normalize: bool = False,
-) -> Trajectory:
+    return_carry: bool = False,
+):
     """Integrate rigid-body rotation with a fixed step and return the saved states.
 
     Args:
@@ -42,13 +47,23 @@ def rollout(
             For per-particle parameters, ``jax.vmap`` over `rollout`.
         save_every: save one state every ``save_every`` steps.
         t0: initial time.
+        drive: a `jaxrot.Drive` imposing angular velocity or moment per body and
+            component (Rockable's driven bodies), or None.
         normalize: normalise ``state.q`` instead of rejecting a non-unit one.
+        return_carry: also return the scheme's final carry (particle axes
+            flattened to one), for example the iteration counts of ``"rozmanov"``.
 
     Returns:
         `Trajectory` with ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)``,
         ``omega`` ``(n_saved, ..., 3)``, ``n_saved = n_steps // save_every + 1``;
         index 0 is the initial state. Steps after the last saved one are not
-        computed. Arrays keep the dtype of ``state``.
+        computed. Arrays keep the dtype of ``state``. With ``return_carry``, a
+        pair ``(trajectory, final_carry)``.
+
+    Warns:
+        RuntimeWarning: when the scheme reports a problem in its final carry
+            (``"rozmanov"``: the half-step iteration hit ``max_iter``); eager
+            calls only.
 
     Raises:
         ValueError: for a wrong shape, non-finite values, a non-unit ``q``, a
@@ -75,49 +90,74 @@ def rollout(
     if t0.ndim != 0:
         raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
 
+    drive, drive_per_particle = check_drive(drive, batch_shape, dtype)
+
     n_particles = 1
     for size in batch_shape:
         n_particles *= size
     flat_state = RotState(state.q.reshape(n_particles, 4), state.omega.reshape(n_particles, 3))
     if per_particle:
         inertia = inertia.reshape(n_particles, *inertia.shape[len(batch_shape) :])
-    traj = _rollout_flat(
-        scheme, flat_state, inertia, per_particle, dt, t0, args, torque, n_steps // save_every, save_every
+    if drive_per_particle:
+        drive = jax.tree_util.tree_map(lambda x: x.reshape(n_particles, 3), drive)
+    traj, carry = _rollout_flat(
+        scheme,
+        flat_state,
+        inertia,
+        per_particle,
+        dt,
+        t0,
+        args,
+        torque,
+        drive,
+        drive_per_particle,
+        n_steps // save_every,
+        save_every,
     )
-    return Trajectory(
+    if is_concrete(carry):
+        message = scheme.report(carry)
+        if message:
+            warnings.warn(message, RuntimeWarning, stacklevel=2)
+    traj = Trajectory(
         traj.t,
         traj.q.reshape(traj.q.shape[0], *batch_shape, 4),
         traj.omega.reshape(traj.omega.shape[0], *batch_shape, 3),
     )
+    return (traj, carry) if return_carry else traj
 
 
 @eqx.filter_jit
-def _rollout_flat(scheme, state, inertia, per_particle, dt, t0, args, torque, n_saves, save_every):
+def _rollout_flat(
+    scheme, state, inertia, per_particle, dt, t0, args, torque, drive, drive_per_particle, n_saves, save_every
+):
     """Rollout of ``(N, ...)`` particles; the compiled core of `rollout`."""
     inertia_axis = 0 if per_particle else None
+    drive_axis = 0 if drive_per_particle else None
     prepared = jax.vmap(body_inertia)(inertia) if per_particle else body_inertia(inertia)
 
-    def init_one(s, inert):
-        return scheme.init(s, t0, inert, torque, args)
+    def init_one(s, inert, drv):
+        return scheme.init(s, t0, inert, torque if drv is None else driven_torque(torque, drv), args)
 
-    def step_one(carry, t, inert):
-        return scheme.step(carry, t, dt, inert, torque, args)
+    def step_one(carry, t, inert, drv):
+        if drv is None:
+            return scheme.step(carry, t, dt, inert, torque, args)
+        return driven_step(scheme, carry, t, dt, inert, torque, args, drv)
 
-    init_all = jax.vmap(init_one, in_axes=(0, inertia_axis))
-    step_all = jax.vmap(step_one, in_axes=(0, None, inertia_axis))
+    init_all = jax.vmap(init_one, in_axes=(0, inertia_axis, drive_axis))
+    step_all = jax.vmap(step_one, in_axes=(0, None, inertia_axis, drive_axis))
 
     def save_interval(carry, save_index):
         def one_step(c, j):
             # t from the step index, not by accumulation, so late times keep full precision.
             t = t0 + (save_index * save_every + j).astype(dt.dtype) * dt
-            return step_all(c, t, prepared), None
+            return step_all(c, t, prepared, drive), None
 
         carry, _ = jax.lax.scan(one_step, carry, jnp.arange(save_every))
         return carry, jax.vmap(scheme.state)(carry)
 
-    carry = init_all(state, prepared)
-    _, saved = jax.lax.scan(save_interval, carry, jnp.arange(n_saves))
+    carry = init_all(state, prepared, drive)
+    carry, saved = jax.lax.scan(save_interval, carry, jnp.arange(n_saves))
     q = jnp.concatenate([state.q[None], saved.q], axis=0)
     omega = jnp.concatenate([state.omega[None], saved.omega], axis=0)
     t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
-    return Trajectory(t, q, omega)
+    return Trajectory(t, q, omega), carry

@@ -38,6 +38,7 @@ __all__ = [
     "log",
     "multiply",
     "normalize",
+    "pure",
     "rotate",
     "to_matrix",
     "to_xyzw",
@@ -63,6 +64,11 @@ def multiply(p, q):
         ],
         axis=-1,
     )
+
+
+def pure(v):
+    """The pure quaternion ``(0, v)`` of a ``(..., 3)`` vector."""
+    return jnp.concatenate([jnp.zeros_like(v[..., :1]), v], axis=-1)
 
 
 def conjugate(q):

@@ -37,10 +37,13 @@ def test_cli_runs_end_to_end_and_writes_table_csv_json_png(tmp_path):
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    assert "max q err [rad]" in proc.stdout and "measured order (zhao)" in proc.stdout
+    assert "max q err [rad]" in proc.stdout
     rows = list(csv.DictReader((out / "compare.csv").read_text().splitlines()))
-    assert [r["scheme"] for r in rows] == ["zhao"] * 3
-    assert [int(r["n_steps"]) for r in rows] == [20, 40, 80]
+    # Every registered scheme gets its rows with no change to the compare code.
+    assert [r["scheme"] for r in rows] == [name for name in jaxrot.SCHEMES for _ in range(3)]
+    assert [int(r["n_steps"]) for r in rows] == [20, 40, 80] * len(jaxrot.SCHEMES)
+    for name in jaxrot.SCHEMES:
+        assert f"measured order ({name})" in proc.stdout
     assert json.loads((out / "compare.json").read_text())["machine"]["jax"]
     assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -3,10 +3,13 @@
 from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
+from .euler import Euler as Euler
+from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
+from .rozmanov import Rozmanov as Rozmanov, RozmanovCarry as RozmanovCarry
 from .zhao import Zhao as Zhao
 
 
-SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (Zhao(),)})
+SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (Zhao(), Rozmanov(), Euler(), NoSquish())})
 
 
 def resolve_scheme(scheme) -> AbstractScheme:

@@ -29,11 +29,14 @@ class AbstractScheme(eqx.Module):
         order: nominal global order of accuracy in ``dt``.
         torque_evals_per_step: calls of the torque callable per step (0 when
             ``torque=None``, which is never called).
+        torque_evals_at_init: extra calls made once by `init` (schemes that
+            reuse the end-of-step torque evaluate the first one there).
     """
 
     name: ClassVar[str]
     order: ClassVar[int]
     torque_evals_per_step: ClassVar[int]
+    torque_evals_at_init: ClassVar[int] = 0
 
     def init(self, state: RotState, t0, inertia: BodyInertia, torque: Torque | None, args) -> Any:
         """Carry for the first step; the plain state unless the scheme needs more."""
@@ -46,6 +49,22 @@ class AbstractScheme(eqx.Module):
     def state(self, carry) -> RotState:
         """The `RotState` held in a carry."""
         return carry
+
+    def with_state(self, carry, state: RotState, inertia: BodyInertia) -> Any:
+        """``carry`` with its orientation and angular velocity replaced by ``state``.
+
+        Used for velocity-driven bodies; schemes that carry derived quantities
+        (a momentum) recompute them here without calling the torque.
+        """
+        return state
+
+    def driven_rotation(self, q, omega, dt):
+        """Orientation after ``dt`` at imposed world angular velocity ``omega``: exactly ``exp(ω Δt) ⊗ q``."""
+        return quat.multiply(quat.exp(dt * omega), q)
+
+    def report(self, carry) -> str | None:
+        """A warning about a finished rollout's carry (concrete values), or None."""
+        return None
 
 
 def body_torque(torque: Torque | None, t, q, omega, args, dtype):
