@@ -8,6 +8,7 @@ import numpy as np
 
 from . import quaternion as quat
 from ._inertia import body_inertia
+from ._particles import flatten_particles, unflatten_trajectory
 from ._state import RotState, Trajectory
 from ._validation import check_inertia, check_state, check_torque, is_concrete
 
@@ -100,17 +101,13 @@ def reference_rollout(
                 f'jax.config.update("jax_enable_x64", True) and pass float64 arrays, or use {name} >= 1e-6.'
             )
 
-    n_particles = int(np.prod(batch_shape, dtype=np.int64))
-    q = state.q.reshape(n_particles, 4)
-    omega = state.omega.reshape(n_particles, 3)
-    if per_particle:
-        inertia = inertia.reshape(n_particles, *inertia.shape[len(batch_shape) :])
-    traj, result = _solve(q, omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps)
+    flat, inertia = flatten_particles(state, inertia, per_particle)
+    traj, result = _solve(flat.q, flat.omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps)
     if is_concrete(result):
         failed = np.asarray(result != diffrax.RESULTS.successful)
         if np.any(failed):
             raise RuntimeError(
-                f"reference_rollout: the diffrax solve failed for {int(failed.sum())} of {n_particles} "
+                f"reference_rollout: the diffrax solve failed for {int(failed.sum())} of {failed.size} "
                 f"particle(s) (max_steps={max_steps}, rtol={rtol:g}, atol={atol:g}). Raise `max_steps`, "
                 "loosen the tolerances, or check the torque for blow-up."
             )
@@ -120,11 +117,7 @@ def reference_rollout(
             result != diffrax.RESULTS.successful,
             "reference_rollout: the diffrax solve failed; raise `max_steps` or loosen rtol/atol.",
         )
-    return Trajectory(
-        traj.t,
-        traj.q.reshape(traj.q.shape[0], *batch_shape, 4),
-        traj.omega.reshape(traj.omega.shape[0], *batch_shape, 3),
-    )
+    return unflatten_trajectory(traj, batch_shape)
 
 
 @eqx.filter_jit

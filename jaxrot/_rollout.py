@@ -8,6 +8,7 @@ import jax.numpy as jnp
 
 from ._drive import check_drive, driven_step, driven_torque
 from ._inertia import body_inertia
+from ._particles import flatten_particles, unflatten_trajectory
 from ._state import RotState, Trajectory
 from ._validation import check_count, check_dt, check_inertia, check_state, check_torque, is_concrete
 from .schemes import resolve_scheme
@@ -92,14 +93,9 @@ def rollout(
 
     drive, drive_per_particle = check_drive(drive, batch_shape, dtype)
 
-    n_particles = 1
-    for size in batch_shape:
-        n_particles *= size
-    flat_state = RotState(state.q.reshape(n_particles, 4), state.omega.reshape(n_particles, 3))
-    if per_particle:
-        inertia = inertia.reshape(n_particles, *inertia.shape[len(batch_shape) :])
+    flat_state, inertia = flatten_particles(state, inertia, per_particle)
     if drive_per_particle:
-        drive = jax.tree_util.tree_map(lambda x: x.reshape(n_particles, 3), drive)
+        drive = jax.tree_util.tree_map(lambda x: x.reshape(-1, 3), drive)
     traj, carry = _rollout_flat(
         scheme,
         flat_state,
@@ -118,11 +114,7 @@ def rollout(
         message = scheme.report(carry)
         if message:
             warnings.warn(message, RuntimeWarning, stacklevel=2)
-    traj = Trajectory(
-        traj.t,
-        traj.q.reshape(traj.q.shape[0], *batch_shape, 4),
-        traj.omega.reshape(traj.omega.shape[0], *batch_shape, 3),
-    )
+    traj = unflatten_trajectory(traj, batch_shape)
     return (traj, carry) if return_carry else traj
 
 
