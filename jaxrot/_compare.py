@@ -105,11 +105,16 @@ def compare(scene="heavy_top", *, t_end=None, coarse_steps=100, levels=6, repeat
     return rows
 
 
+ASYMPTOTIC_ERROR = 0.1  # rad; above this the error saturates and says nothing about the order
+
+
 def measured_orders(rows) -> dict:
+    """Per scheme, the fitted order over the rungs with error below `ASYMPTOTIC_ERROR` (None if < 3)."""
     orders = {}
     for name in dict.fromkeys(r["scheme"] for r in rows):
-        mine = [r for r in rows if r["scheme"] == name]
-        orders[name] = fit_order([r["dt"] for r in mine], [r["max_orientation_error_rad"] for r in mine])
+        mine = [r for r in rows if r["scheme"] == name and r["max_orientation_error_rad"] < ASYMPTOTIC_ERROR]
+        errors = [r["max_orientation_error_rad"] for r in mine]
+        orders[name] = fit_order([r["dt"] for r in mine], errors) if len(mine) >= 3 else None
     return orders
 
 
@@ -124,7 +129,8 @@ def format_table(rows) -> str:
             f"{r['final_omega_error']:>11.3e} {r['us_per_step']:>9.3f}"
         )
     for name, order in measured_orders(rows).items():
-        lines.append(f"measured order ({name}): {order:.3f} (nominal {SCHEMES[name].order})")
+        fitted = "n/a: fewer than 3 rungs below 0.1 rad" if order is None else f"{order:.3f}"
+        lines.append(f"measured order ({name}): {fitted} (nominal {SCHEMES[name].order})")
     return "\n".join(lines)
 
 

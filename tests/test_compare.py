@@ -10,7 +10,7 @@ import pytest
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._compare import compare, fit_order
+from jaxrot._compare import compare, fit_order, measured_orders
 
 
 def test_cli_runs_end_to_end_and_writes_table_csv_json_png(tmp_path):
@@ -75,6 +75,15 @@ def test_error_column_equals_an_independent_computation():
     assert row["max_orientation_error_rad"] == pytest.approx(on_coarse_grid, rel=1e-9)
     assert row["max_orientation_error_rad"] <= every_step * (1 + 1e-9)
     assert row["torque_evals"] == 2 * row["n_steps"]
+
+
+def test_measured_orders_skip_saturated_rungs():
+    rows = [
+        {"scheme": "zhao", "dt": dt, "max_orientation_error_rad": err}
+        for dt, err in [(0.4, 3.0), (0.2, 0.08), (0.1, 0.02), (0.05, 0.005)]
+    ]
+    assert measured_orders(rows)["zhao"] == pytest.approx(2.0, abs=1e-12)
+    assert measured_orders(rows[:3])["zhao"] is None
 
 
 def test_fit_order_recovers_a_known_slope():
