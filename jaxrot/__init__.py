@@ -7,7 +7,7 @@ callable ``torque(t, q, omega, args) -> (3,)`` in the world frame.
 
 import importlib.metadata
 
-from . import quaternion as quaternion, schemes as schemes
+from . import analytic as analytic, diagnostics as diagnostics, quaternion as quaternion, schemes as schemes
 from ._drive import Drive as Drive
 from ._inertia import BodyInertia as BodyInertia, body_inertia as body_inertia
 from ._reference import reference_rollout as reference_rollout

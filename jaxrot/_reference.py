@@ -10,7 +10,7 @@ from . import quaternion as quat
 from ._inertia import body_inertia
 from ._particles import flatten_particles, unflatten_trajectory
 from ._state import RotState, Trajectory
-from ._validation import check_inertia, check_state, check_torque, is_concrete
+from ._validation import check_bodies, check_times, check_torque, is_concrete
 
 
 def _vector_field(t, y, ctx):
@@ -78,20 +78,11 @@ def reference_rollout(
         >>> ref.q.shape
         (3, 4)
     """
-    state = check_state(state, normalize=normalize)
+    state, inertia, per_particle = check_bodies(state, inertia, normalize=normalize)
     dtype = state.q.dtype
     batch_shape = state.q.shape[:-1]
-    inertia, per_particle = check_inertia(inertia, batch_shape, dtype)
     check_torque(torque)
-    ts = jnp.asarray(ts).astype(dtype)
-    if ts.ndim != 1 or ts.shape[0] < 1:
-        raise ValueError(f"`ts` must be a 1-D array of at least one time; got shape {ts.shape}.")
-    if is_concrete(ts):
-        ts_np = np.asarray(ts)
-        if not np.all(np.isfinite(ts_np)):
-            raise ValueError("`ts` contains NaN or infinite values.")
-        if np.any(np.diff(ts_np) < 0):
-            raise ValueError("`ts` must be non-decreasing (save times in order).")
+    ts = check_times(ts, dtype, ordered=True)
     for name, tol in (("rtol", rtol), ("atol", atol)):
         if not tol > 0:
             raise ValueError(f"`{name}` must be > 0; got {tol}.")

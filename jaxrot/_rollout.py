@@ -10,7 +10,7 @@ from ._drive import check_drive, driven_step, driven_torque
 from ._inertia import body_inertia
 from ._particles import flatten_particles, unflatten_trajectory
 from ._state import RotState, Trajectory
-from ._validation import check_count, check_dt, check_inertia, check_state, check_torque, is_concrete
+from ._validation import check_bodies, check_count, check_dt, check_torque, is_concrete
 from .schemes import resolve_scheme
 
 
@@ -79,10 +79,9 @@ def rollout(
         (11, 4)
     """
     scheme = resolve_scheme(scheme)
-    state = check_state(state, normalize=normalize)
+    state, inertia, per_particle = check_bodies(state, inertia, normalize=normalize)
     dtype = state.q.dtype
     batch_shape = state.q.shape[:-1]
-    inertia, per_particle = check_inertia(inertia, batch_shape, dtype)
     dt = check_dt(dt).astype(dtype)
     n_steps = check_count(n_steps, "n_steps", 0)
     save_every = check_count(save_every, "save_every", 1)

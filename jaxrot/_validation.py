@@ -118,6 +118,28 @@ def check_inertia_values(inertia: np.ndarray, name="inertia"):
         )
 
 
+def check_bodies(state, inertia, *, normalize=False):
+    """`check_state` then `check_inertia` for its particle axes: ``(state, inertia, per_particle)``."""
+    state = check_state(state, normalize=normalize)
+    inertia, per_particle = check_inertia(inertia, state.q.shape[:-1], state.q.dtype)
+    return state, inertia, per_particle
+
+
+def check_times(ts, dtype, *, ordered, name="ts"):
+    """A finite 1-D array of at least one time, cast to ``dtype``; non-decreasing if ``ordered``."""
+    ts = jnp.asarray(ts)
+    if ts.ndim != 1 or ts.shape[0] < 1:
+        raise ValueError(f"`{name}` must be a 1-D array of at least one time; got shape {ts.shape}.")
+    ts = ts.astype(dtype)
+    if is_concrete(ts):
+        ts_np = np.asarray(ts)
+        if not np.all(np.isfinite(ts_np)):
+            raise ValueError(f"`{name}` contains NaN or infinite values.")
+        if ordered and np.any(np.diff(ts_np) < 0):
+            raise ValueError(f"`{name}` must be non-decreasing (save times in order).")
+    return ts
+
+
 def check_dt(dt, name="dt"):
     dt_arr = jnp.asarray(dt)
     if dt_arr.ndim != 0:

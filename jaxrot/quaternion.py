@@ -82,10 +82,16 @@ def rotate(q, v):
     Uses ``v + 2w (u × v) + 2 u × (u × v)`` with ``q = (w, u)``, which equals
     ``q ⊗ (0, v) ⊗ q*`` for unit ``q`` at a third of the cost.
     """
-    w = q[..., :1]
-    u = q[..., 1:]
-    t = 2 * jnp.cross(u, v)
-    return v + w * t + jnp.cross(u, t)
+    # Written out per component: a smaller graph than two jnp.cross calls, which
+    # shortens compile times of the schemes that rotate several times per step.
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx = 2 * (y * vz - z * vy)
+    ty = 2 * (z * vx - x * vz)
+    tz = 2 * (x * vy - y * vx)
+    return jnp.stack(
+        [vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx], axis=-1
+    )
 
 
 def normalize(q):

@@ -6,10 +6,13 @@ from ._base import AbstractScheme as AbstractScheme
 from .euler import Euler as Euler
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
 from .rozmanov import Rozmanov as Rozmanov, RozmanovCarry as RozmanovCarry
+from .splitting import Splitting as Splitting, SplittingCarry as SplittingCarry
 from .zhao import Zhao as Zhao
 
 
-SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (Zhao(), Rozmanov(), Euler(), NoSquish())})
+SCHEMES = MappingProxyType(
+    {scheme.name: scheme for scheme in (Zhao(), Rozmanov(), Euler(), NoSquish(), Splitting())}
+)
 
 
 def resolve_scheme(scheme) -> AbstractScheme:

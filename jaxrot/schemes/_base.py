@@ -56,7 +56,11 @@ class AbstractScheme(eqx.Module):
         Used for velocity-driven bodies; schemes that carry derived quantities
         (a momentum) recompute them here without calling the torque.
         """
-        return state
+        if isinstance(carry, RotState):
+            return state
+        raise NotImplementedError(
+            f"{type(self).__name__} carries {type(carry).__name__}: override with_state to support drives."
+        )
 
     def driven_rotation(self, q, omega, dt):
         """Orientation after ``dt`` at imposed world angular velocity ``omega``: exactly ``exp(ω Δt) ⊗ q``."""

@@ -1,0 +1,127 @@
+"""Strang splitting: half torque kick, exact free rotation, half torque kick."""
+
+from typing import Any, ClassVar, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .. import quaternion as quat
+from .._inertia import body_inertia
+from .._state import RotState
+from ..analytic import free_motion, principal_axes
+from ._base import AbstractScheme
+
+
+class SplittingCarry(NamedTuple):
+    """What `Splitting` carries between steps (one body).
+
+    Attributes:
+        state: the `RotState` ``(q (4,), omega (3,))``, body → world, world ω.
+        torque: world-frame torque ``(3,)`` at the end of the last step (the
+            first half-kick of the next step reuses it), or None when torque-free.
+        moments: ascending principal moments ``(3,)``.
+        principal: quaternion ``(4,)`` from the principal frame to the body frame.
+    """
+
+    state: RotState
+    torque: Any
+    moments: jax.Array
+    principal: jax.Array
+
+
+def _world_torque(torque, t, q, omega, args, dtype):
+    tau = jnp.asarray(torque(t, q, omega, args)).astype(dtype)
+    if tau.shape != (3,):
+        raise ValueError(
+            f"`torque` must return a world-frame torque of shape (3,) for one body; got {tau.shape}."
+        )
+    return tau
+
+
+def _kick(q_principal, moments, impulse):
+    """World ω change from a world angular impulse ``ΔL``: ``q I⁻¹ q* ΔL``."""
+    return quat.rotate(q_principal, quat.rotate(quat.conjugate(q_principal), impulse) / moments)
+
+
+class Splitting(AbstractScheme):
+    r"""Kick–rotate–kick Strang splitting with the exact free rigid body; order 2, one torque call per step.
+
+    One step from ``(q0, ω0)`` at time ``t``, with ``τ0`` the torque carried from
+    the previous step (or evaluated once by `init`):
+
+    1. half kick: world angular momentum ``L += Δt/2 · τ0``;
+    2. exact torque-free rotation over ``Δt`` (`jaxrot.analytic.free_motion`:
+       Jacobi elliptic functions and the elliptic integral of the third kind,
+       exact to round-off for any ``Δt``) → ``(q1, ω*)``;
+    3. ``τ1 = T(t + Δt, q1, ω̃)`` with ``ω̃ = ω*`` after a half kick by ``τ0``
+       (a predictor of ``ω1``, so a velocity-dependent torque is still taken at
+       an ``O(Δt²)``-accurate velocity);
+    4. half kick ``L += Δt/2 · τ1``; ``τ1`` is carried to the next step.
+
+    The torque is therefore called once per step, plus once in `init`. For a
+    torque-free body (``torque=None``) the kicks vanish and the scheme is exact
+    at any ``Δt`` (a few ulp per step). The principal axes of ``inertia`` (``eigh``
+    for a full tensor) are computed once, in `init`, and carried: to use `step`
+    alone, start from ``init(state, t0, inertia, torque, args)`` and read the
+    state back with `state`.
+
+    Accuracy: on the built-in ``heavy_top`` scene (t = 5, reference at 1e-13) the
+    largest orientation error is 2.3e-5 rad at ``Δt = 0.01`` and 5.7e-6 at 0.005,
+    against 1.4e-3 and 3.5e-4 for ``"zhao"``, with half the torque calls. Gradients
+    are finite everywhere, also at ``ω = 0``; the measure-zero inputs where they are
+    not the true derivatives are listed in `jaxrot.analytic`.
+
+    Frames and shapes (one body; `jaxrot.rollout` vmaps): ``q`` ``(4,)`` scalar
+    first, body → world; ``omega`` ``(3,)`` world; ``inertia`` body frame, ``(3,)``
+    principal moments or ``(3, 3)`` tensor; torque world frame ``(3,)``.
+
+    Reference:
+        E. Celledoni, F. Fassò, N. Säfström and A. Zanna, "The exact computation
+        of the free rigid body motion and its use in splitting methods", SIAM J.
+        Sci. Comput. 30(4), 2084–2112 (2008), doi:10.1137/070704393.
+
+    Example:
+        >>> import jax.numpy as jnp, jaxrot
+        >>> from jaxrot import diagnostics
+        >>> from jaxrot.schemes.splitting import Splitting
+        >>> inertia = jnp.array([1.0, 2.0, 3.0])
+        >>> s = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 1.0, 0.2]))
+        >>> traj = jaxrot.rollout(Splitting(), s, inertia, 0.5, 20)  # torque-free: exact at any dt
+        >>> energy = diagnostics.kinetic_energy(traj.q, traj.omega, inertia)
+        >>> print(traj.q.shape, bool(jnp.allclose(energy, energy[0], rtol=1e-5)))
+        (21, 4) True
+    """
+
+    name: ClassVar[str] = "splitting"
+    order: ClassVar[int] = 2
+    torque_evals_per_step: ClassVar[int] = 1
+    torque_evals_at_init: ClassVar[int] = 1
+
+    def init(self, state, t0, inertia, torque, args):
+        inertia = body_inertia(inertia)
+        q, omega = state
+        moments, principal = principal_axes(inertia.tensor)
+        tau = None if torque is None else _world_torque(torque, t0, q, omega, args, q.dtype)
+        return SplittingCarry(RotState(q, omega), tau, moments, principal)
+
+    def step(self, carry, t, dt, inertia, torque, args):
+        (q, omega), tau, moments, principal = carry
+        dtype = q.dtype
+        half = 0.5 * dt
+        q_p = quat.multiply(q, principal)
+        if torque is not None:
+            omega = omega + _kick(q_p, moments, half * tau)
+        q_p1, omega1 = free_motion(q_p, omega, moments, dt)
+        q1 = quat.multiply(q_p1, quat.conjugate(principal))
+        tau1 = None
+        if torque is not None:
+            omega_pred = omega1 + _kick(q_p1, moments, half * tau)
+            tau1 = _world_torque(torque, t + dt, q1, omega_pred, args, dtype)
+            omega1 = omega1 + _kick(q_p1, moments, half * tau1)
+        return SplittingCarry(RotState(q1, omega1), tau1, moments, principal)
+
+    def state(self, carry):
+        return carry.state
+
+    def with_state(self, carry, state, inertia):
+        return carry._replace(state=state)
