@@ -73,9 +73,10 @@ def test_reference_rollout_checks_state_and_inertia_the_same_way(kwargs, match):
         )
 
 
-def test_torque_of_wrong_shape_is_reported():
+@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+def test_torque_of_wrong_shape_is_reported(scheme):
     with pytest.raises(ValueError, match=r"torque.*shape \(3,\)"):
-        run(torque=lambda t, q, omega, args: jnp.zeros(2))
+        run(scheme=scheme, torque=lambda t, q, omega, args: jnp.zeros(2))
 
 
 def test_n_steps_traced_is_rejected_clearly():

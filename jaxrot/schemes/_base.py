@@ -71,13 +71,18 @@ class AbstractScheme(eqx.Module):
         return None
 
 
-def body_torque(torque: Torque | None, t, q, omega, args, dtype):
-    """Torque in the body frame of ``q``; None when the scene is torque-free."""
-    if torque is None:
-        return None
-    tau = jnp.asarray(torque(t, q, omega, args)).astype(dtype)
+def world_torque(torque: Torque, t, q, omega, args):
+    """The torque callable's world-frame torque ``(3,)``, in the dtype of ``q``, shape-checked."""
+    tau = jnp.asarray(torque(t, q, omega, args)).astype(q.dtype)
     if tau.shape != (3,):
         raise ValueError(
             f"`torque` must return a world-frame torque of shape (3,) for one body; got {tau.shape}."
         )
-    return quat.rotate(quat.conjugate(q), tau)
+    return tau
+
+
+def body_torque(torque: Torque | None, t, q, omega, args):
+    """Torque in the body frame of ``q``; None when the scene is torque-free."""
+    if torque is None:
+        return None
+    return quat.rotate(quat.conjugate(q), world_torque(torque, t, q, omega, args))

@@ -50,7 +50,7 @@ class Euler(AbstractScheme):
         inertia = body_inertia(inertia)
         q, omega = carry
         omega_b = quat.rotate(quat.conjugate(q), omega)
-        tau_b = body_torque(torque, t, q, omega, args, q.dtype)
+        tau_b = body_torque(torque, t, q, omega, args)
         accel = quat.rotate(q, inertia.angular_acceleration(omega_b, tau_b))
         return RotState(self.driven_rotation(q, omega, dt), omega + dt * accel)
 

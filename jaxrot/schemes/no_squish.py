@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from .. import quaternion as quat
 from .._inertia import BodyInertia, body_inertia
 from .._state import RotState
-from ._base import AbstractScheme
+from ._base import AbstractScheme, world_torque
 
 
 class NoSquishCarry(NamedTuple):
@@ -117,12 +117,8 @@ class NoSquish(AbstractScheme):
         inertia = body_inertia(inertia)
         moments, principal_to_body = _principal_frame(inertia)
         q, omega = state
-        torque_world = jnp.zeros_like(omega) if torque is None else self._torque(torque, t0, state, args)
+        torque_world = jnp.zeros_like(omega) if torque is None else world_torque(torque, t0, q, omega, args)
         return self._carry(state, moments, principal_to_body, torque_world)
-
-    @staticmethod
-    def _torque(torque, t, state, args):
-        return jnp.asarray(torque(t, state.q, state.omega, args)).astype(state.q.dtype)
 
     @staticmethod
     def _carry(state, moments, principal_to_body, torque_world):
@@ -157,7 +153,8 @@ class NoSquish(AbstractScheme):
         if torque is None:
             torque_world = carry.torque
         else:
-            torque_world = self._torque(torque, t + dt, self._state(q, p, moments, r), args)
+            end = self._state(q, p, moments, r)
+            torque_world = world_torque(torque, t + dt, end.q, end.omega, args)
         p = self._kick(q, p, torque_world, moments, half)
         return NoSquishCarry(q, p, torque_world, moments, r, self._state(q, p, moments, r))
 

@@ -9,7 +9,7 @@ import numpy as np
 from .. import quaternion as quat
 from .._inertia import body_inertia
 from .._state import RotState
-from ._base import AbstractScheme
+from ._base import AbstractScheme, world_torque
 
 
 class RozmanovCarry(NamedTuple):
@@ -36,10 +36,12 @@ def _world_omega(q, angular_momentum, inertia):
     return quat.rotate(q, inertia.solve(quat.rotate(quat.conjugate(q), angular_momentum)))
 
 
+def _world_angular_momentum(q, omega, inertia):
+    return quat.rotate(q, inertia.apply(quat.rotate(quat.conjugate(q), omega)))
+
+
 def _world_torque(torque, t, q, omega, args):
-    if torque is None:
-        return jnp.zeros_like(omega)
-    return jnp.asarray(torque(t, q, omega, args)).astype(q.dtype)
+    return jnp.zeros_like(omega) if torque is None else world_torque(torque, t, q, omega, args)
 
 
 class Rozmanov(AbstractScheme):
@@ -98,7 +100,7 @@ class Rozmanov(AbstractScheme):
     def init(self, state, t0, inertia, torque, args):
         inertia = body_inertia(inertia)
         q, omega = state
-        angular_momentum = quat.rotate(q, inertia.apply(quat.rotate(quat.conjugate(q), omega)))
+        angular_momentum = _world_angular_momentum(q, omega, inertia)
         zero = jnp.zeros((), jnp.int32)
         return RozmanovCarry(
             state, angular_momentum, _world_torque(torque, t0, q, omega, args), zero, zero, zero
@@ -151,9 +153,7 @@ class Rozmanov(AbstractScheme):
         return carry.state
 
     def with_state(self, carry, state, inertia):
-        inertia = body_inertia(inertia)
-        q, omega = state
-        angular_momentum = quat.rotate(q, inertia.apply(quat.rotate(quat.conjugate(q), omega)))
+        angular_momentum = _world_angular_momentum(state.q, state.omega, body_inertia(inertia))
         return carry._replace(state=state, angular_momentum=angular_momentum)
 
     def report(self, carry):

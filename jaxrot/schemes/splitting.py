@@ -3,13 +3,12 @@
 from typing import Any, ClassVar, NamedTuple
 
 import jax
-import jax.numpy as jnp
 
 from .. import quaternion as quat
 from .._inertia import body_inertia
 from .._state import RotState
 from ..analytic import free_motion, principal_axes
-from ._base import AbstractScheme
+from ._base import AbstractScheme, world_torque
 
 
 class SplittingCarry(NamedTuple):
@@ -27,15 +26,6 @@ class SplittingCarry(NamedTuple):
     torque: Any
     moments: jax.Array
     principal: jax.Array
-
-
-def _world_torque(torque, t, q, omega, args, dtype):
-    tau = jnp.asarray(torque(t, q, omega, args)).astype(dtype)
-    if tau.shape != (3,):
-        raise ValueError(
-            f"`torque` must return a world-frame torque of shape (3,) for one body; got {tau.shape}."
-        )
-    return tau
 
 
 def _kick(q_principal, moments, impulse):
@@ -101,12 +91,11 @@ class Splitting(AbstractScheme):
         inertia = body_inertia(inertia)
         q, omega = state
         moments, principal = principal_axes(inertia.tensor)
-        tau = None if torque is None else _world_torque(torque, t0, q, omega, args, q.dtype)
+        tau = None if torque is None else world_torque(torque, t0, q, omega, args)
         return SplittingCarry(RotState(q, omega), tau, moments, principal)
 
     def step(self, carry, t, dt, inertia, torque, args):
         (q, omega), tau, moments, principal = carry
-        dtype = q.dtype
         half = 0.5 * dt
         q_p = quat.multiply(q, principal)
         if torque is not None:
@@ -116,7 +105,7 @@ class Splitting(AbstractScheme):
         tau1 = None
         if torque is not None:
             omega_pred = omega1 + _kick(q_p1, moments, half * tau)
-            tau1 = _world_torque(torque, t + dt, q1, omega_pred, args, dtype)
+            tau1 = world_torque(torque, t + dt, q1, omega_pred, args)
             omega1 = omega1 + _kick(q_p1, moments, half * tau1)
         return SplittingCarry(RotState(q1, omega1), tau1, moments, principal)
 

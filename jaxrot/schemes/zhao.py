@@ -55,11 +55,10 @@ class Zhao(AbstractScheme):
     def step(self, carry, t, dt, inertia, torque, args):
         inertia = body_inertia(inertia)
         q0, omega0 = carry
-        dtype = q0.dtype
         to_body = quat.conjugate(q0)
 
         omega_b0 = quat.rotate(to_body, omega0)
-        tau_b0 = body_torque(torque, t, q0, omega0, args, dtype)
+        tau_b0 = body_torque(torque, t, q0, omega0, args)
         accel_b0 = inertia.angular_acceleration(omega_b0, tau_b0)
 
         omega_b_quarter = omega_b0 + (0.25 * dt) * accel_b0
@@ -69,7 +68,7 @@ class Zhao(AbstractScheme):
         q_half = quat.multiply(quat.exp((0.5 * dt) * omega_quarter), q0)
 
         omega_half = quat.rotate(q_half, omega_b_half)
-        tau_b_half = body_torque(torque, t + 0.5 * dt, q_half, omega_half, args, dtype)
+        tau_b_half = body_torque(torque, t + 0.5 * dt, q_half, omega_half, args)
         accel_b_half = inertia.angular_acceleration(omega_b_half, tau_b_half)
 
         step_rotation = quat.exp(dt * omega_half)
