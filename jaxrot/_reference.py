@@ -11,6 +11,7 @@ from ._inertia import body_inertia
 from ._particles import flatten_particles, unflatten_trajectory
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_times, check_torque, is_concrete
+from .schemes._base import body_torque
 
 
 def _vector_field(t, y, ctx):
@@ -22,11 +23,7 @@ def _vector_field(t, y, ctx):
     inertia, torque, args = ctx
     q, omega_b = y
     q_unit = quat.normalize(q)
-    tau_b = None
-    if torque is not None:
-        omega = quat.rotate(q_unit, omega_b)
-        tau = jnp.asarray(torque(t, q_unit, omega, args)).astype(q.dtype)
-        tau_b = quat.rotate(quat.conjugate(q_unit), tau)
+    tau_b = None if torque is None else body_torque(torque, t, q_unit, quat.rotate(q_unit, omega_b), args)
     q_dot = 0.5 * quat.multiply(q, quat.pure(omega_b))
     return q_dot, inertia.angular_acceleration(omega_b, tau_b)
 

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from .. import quaternion as quat
 from .._inertia import BodyInertia, body_inertia
 from .._state import RotState
+from ..analytic import principal_axes
 from ._base import AbstractScheme, world_torque
 
 
@@ -63,10 +64,7 @@ def _principal_frame(inertia: BodyInertia):
     """Principal moments and principal → body quaternion (None for diagonal inertia)."""
     if inertia.is_diagonal:
         return inertia.tensor, None
-    moments, vectors = jnp.linalg.eigh(inertia.tensor)
-    # eigh may return a reflection; flip one axis so the columns form a rotation.
-    vectors = vectors.at[:, 2].multiply(jnp.sign(jnp.linalg.det(vectors)))
-    return moments, quat.from_matrix(vectors)
+    return principal_axes(inertia.tensor)
 
 
 class NoSquish(AbstractScheme):
