@@ -7,13 +7,25 @@ callable ``torque(t, q, omega, args) -> (3,)`` in the world frame.
 
 import importlib.metadata
 
-from . import analytic as analytic, diagnostics as diagnostics, quaternion as quaternion, schemes as schemes
+from . import (
+    analytic as analytic,
+    comparison as comparison,
+    diagnostics as diagnostics,
+    quaternion as quaternion,
+    scenes as scenes,
+    schemes as schemes,
+    stability as stability,
+    torques as torques,
+)
 from ._drive import Drive as Drive
+from ._fit import FitResult as FitResult, fit_inertia as fit_inertia
 from ._inertia import BodyInertia as BodyInertia, body_inertia as body_inertia
+from ._particles import per_body as per_body
 from ._reference import reference_rollout as reference_rollout
 from ._rollout import rollout as rollout
-from ._scenes import SCENES as SCENES, Scene as Scene
+from ._runtime_check import IntegrationError as IntegrationError
 from ._state import RotState as RotState, Trajectory as Trajectory
+from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
 
 

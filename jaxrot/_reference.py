@@ -8,7 +8,7 @@ import numpy as np
 
 from . import quaternion as quat
 from ._inertia import body_inertia
-from ._particles import flatten_particles, unflatten_trajectory
+from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_times, check_torque, is_concrete
 from .schemes._base import body_torque
@@ -90,7 +90,11 @@ def reference_rollout(
             )
 
     flat, inertia = flatten_particles(state, inertia, per_particle)
-    traj, result = _solve(flat.q, flat.omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps)
+    args, args_axes = split_per_body(args, batch_shape)
+    traj, result, _ = adaptive_solve(
+        diffrax.Dopri8(), flat.q, flat.omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps,
+        args_axes,
+    )  # fmt: skip
     if is_concrete(result):
         failed = np.asarray(result != diffrax.RESULTS.successful)
         if np.any(failed):
@@ -109,26 +113,58 @@ def reference_rollout(
 
 
 @eqx.filter_jit
-def _solve(q, omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps):
-    def solve_one(q0, omega0, inert):
-        inert = body_inertia(inert)
+def adaptive_solve(
+    solver, q, omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps, args_axes=None
+):
+    """Adaptive diffrax solve of ``(N, ...)`` flattened particles (no input checks).
+
+    Each particle gets its own adaptive steps, except under a coupled torque
+    (``torque.coupled``, `jaxrot.torques`), where all bodies form one system
+    with shared steps. Returns ``(trajectory, result, n_steps)``: the diffrax
+    result code and the number of attempted steps (accepted + rejected) per
+    particle. Shared by `reference_rollout` and ``python -m jaxrot compare``.
+    """
+    inertia_axis = 0 if per_particle else None
+    prepare = jax.vmap(body_inertia) if per_particle else body_inertia
+    coupled = getattr(torque, "coupled", False)
+
+    def solve(q0, omega0, inert, a, field):
         omega_b0 = quat.rotate(quat.conjugate(q0), omega0)
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(_vector_field),
-            diffrax.Dopri8(),
+            diffrax.ODETerm(field),
+            solver,
             t0=ts[0],
             t1=ts[-1],
             dt0=None,
             y0=(q0, omega_b0),
-            args=(inert, torque, args),
+            args=(inert, torque, a),
             saveat=diffrax.SaveAt(ts=ts),
             stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
             max_steps=max_steps,
             throw=False,
         )
         q_t = quat.normalize(sol.ys[0])
-        return q_t, quat.rotate(q_t, sol.ys[1]), sol.result
+        return q_t, quat.rotate(q_t, sol.ys[1]), sol.result, sol.stats["num_steps"]
 
-    in_axes = (0, 0, 0 if per_particle else None)
-    q_t, omega_t, result = jax.vmap(solve_one, in_axes=in_axes)(q, omega, inertia)
-    return Trajectory(ts, jnp.swapaxes(q_t, 0, 1), jnp.swapaxes(omega_t, 0, 1)), result
+    if coupled:
+        # One ODE for all bodies; the per-body field is vmapped over the named particle axis.
+        def system_field(t, y, ctx):
+            inert, trq, a = ctx
+            return jax.vmap(
+                lambda yi, ii, ai: _vector_field(t, yi, (ii, trq, ai)),
+                in_axes=(0, inertia_axis, args_axes),
+                axis_name=PARTICLES,
+            )(y, inert, a)
+
+        q_t, omega_t, result, n_steps = solve(q, omega, prepare(inertia), args, system_field)
+        n = q.shape[0]
+        result = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n,)), result)  # an enum item
+        n_steps = jnp.broadcast_to(n_steps, (n,))
+        return Trajectory(ts, q_t, omega_t), result, n_steps
+
+    def solve_one(q0, omega0, inert, a):
+        return solve(q0, omega0, body_inertia(inert), a, _vector_field)
+
+    in_axes = (0, 0, inertia_axis, args_axes)
+    q_t, omega_t, result, n_steps = jax.vmap(solve_one, in_axes=in_axes)(q, omega, inertia, args)
+    return Trajectory(ts, jnp.swapaxes(q_t, 0, 1), jnp.swapaxes(omega_t, 0, 1)), result, n_steps

@@ -212,6 +212,38 @@ _TO_REVERSED = (0.5**0.5, 0.0, -(0.5**0.5), 0.0)
 _STANDIN_MOMENTS = (1.0, 2.0, 3.0)
 _STANDIN_OMEGA = (1.0, 0.5, 2.0)
 
+# Short flights, θ = max(1, κ) |ω| |t| < _TAYLOR_MAX with κ = max |I_j − I_k| / I_i (<= 1 for a physical
+# body), are taken from the Taylor series in t to order _TAYLOR_ORDER. The coefficients of ω_b(t)
+# and of the body-frame rotation p(t) are bounded by majorants that grow like (1.5 θ)^k, so the
+# truncation error is below (1.5 θ)^(N+1) ~ 7e-20 < eps · θ: exact to round-off, relative to the
+# small rotation too. Its derivatives are those of a polynomial, with none of the amplitude/phase
+# singularities of the elliptic formulas near ω = 0 and near steady rotation.
+_TAYLOR_ORDER = 8
+_TAYLOR_MAX = 5e-3
+
+
+def _taylor(w, moments, t):
+    """``(p(t), ω_b(t))`` by their Taylor series: ``q(t) = q₀ ⊗ p(t)``, body-frame ``ω_b``.
+
+    Euler's equations ``ω̇_b = I⁻¹ (I ω_b × ω_b)`` and ``ṗ = ½ p ⊗ (0, ω_b)`` with
+    ``p(0) = 1`` are quadratic, so the coefficients (scaled by ``t^k``) follow from
+    Cauchy products: ``a_{k+1} = t/(k+1) I⁻¹ Σ I a_i × a_{k−i}``,
+    ``b_{k+1} = t/(2(k+1)) Σ b_i ⊗ (0, a_{k−i})``.
+    """
+    # Each Cauchy product is one vectorised cross / quaternion product over stacked coefficients
+    # (unrolled scalar products would make the HLO, and the compile time of gradients, ~5x larger).
+    a = [w]
+    b = [jnp.array(_IDENTITY, w.dtype)]
+    scaled_moments = moments[None, :]
+    for k in range(_TAYLOR_ORDER):
+        head = jnp.stack(a)
+        tail = head[::-1]
+        a.append((t / (k + 1)) * jnp.sum(jnp.cross(scaled_moments * head, tail), axis=0) / moments)
+        b.append((t / (2 * (k + 1))) * jnp.sum(quat.multiply(jnp.stack(b), quat.pure(tail)), axis=0))
+    p = sum(reversed(b[1:])).at[0].add(1)  # the small terms first
+    omega_t = sum(reversed(a[1:])) + a[0]
+    return p, omega_t
+
 
 def free_motion(q_principal, omega, moments, t):
     """Exact torque-free motion of one body over a time ``t``, in its principal frame.
@@ -242,40 +274,58 @@ def free_motion(q_principal, omega, moments, t):
     symmetric = (i1 == i2) | (i2 == i3)
     closed_form = steady | symmetric
 
-    # Steady rotation and symmetric top, one formula:
-    # q(t) = exp(t Ω) ⊗ q0 ⊗ exp(−λ t a) with Ω = L_w / I⊥ (symmetric) or ω, λ = 0 (steady).
+    # Short flight (|ω| t small, ω = 0 included): the Taylor series, behind a double where.
+    kappa = jnp.max(jnp.abs(moments[jnp.array([1, 2, 0])] - moments[jnp.array([2, 0, 1])]) / moments)
+    theta = jnp.maximum(kappa, 1) * jnp.sqrt(jnp.sum(w * w)) * jnp.abs(t)
+    short = theta < _TAYLOR_MAX
+    p_short, w_short = _taylor(w, moments, jnp.where(short, t, 0))
+    q_short = quat.multiply(q_principal, p_short)
+
+    # Symmetric top (and steady rotation of an asymmetric body, λ = 0, Ω = ω), one formula:
+    # q(t) = exp(t Ω) ⊗ q0 ⊗ exp(−λ t a), Ω = L_w / I⊥ = ω + λ a_w, λ = (I_a − I⊥)(ω·a) / I⊥.
+    # Written with I⊥ the mean of the two equal moments, so that its derivatives are those along
+    # the inertia perturbations that keep the symmetry (the others are added below).
+    steady_asym = steady & ~symmetric
     axis3 = i1 == i2
     e_axis = jnp.where(axis3, jnp.array([0.0, 0.0, 1.0], dtype), jnp.array([1.0, 0.0, 0.0], dtype))
     i_axis = jnp.where(axis3, i3, i1)
-    lam = jnp.where(steady, 0, (i_axis - i2) * jnp.dot(w, e_axis) / i2)
-    spin = jnp.where(steady, omega, quat.rotate(q_principal, moments * w) / i2)
+    i_perp = jnp.where(axis3, 0.5 * (i1 + i2), 0.5 * (i2 + i3))
+    lam = jnp.where(steady_asym, 0, (i_axis - i_perp) * jnp.dot(w, e_axis) / i_perp)
+    spin = jnp.where(steady_asym, omega, quat.rotate(q_principal, w + lam * e_axis))
     precess = quat.normalize(quat.multiply(quat.exp(t * spin), q_principal))
     q_sym = quat.multiply(precess, quat.exp(-lam * t * e_axis))
-    omega_sym = jnp.where(steady, omega, quat.rotate(precess, w))
+    omega_sym = jnp.where(steady_asym, omega, quat.rotate(precess, w))
 
-    # Asymmetric: choose the frame in which L circulates about axis 3.
+    # Asymmetric: choose the frame in which L circulates about axis 3. For a symmetric top the
+    # case-A formulas (valid there with m = n = 0) are evaluated with stopped gradients except
+    # along the symmetry-breaking inertia perturbation d, whose derivative they supply.
+    standin = steady | short
+    breaking = symmetric & ~standin
+    d = jnp.where(axis3, jnp.array([1.0, -1.0, 0.0], dtype), jnp.array([0.0, 1.0, -1.0], dtype))
+    fixed = lax.stop_gradient(moments)
+    moments_a = jnp.where(breaking, fixed + d * (0.5 * jnp.dot(d, moments - fixed)), moments)
+    w_a = jnp.where(breaking, lax.stop_gradient(w), w)
+    q_a = jnp.where(breaking, lax.stop_gradient(q_principal), q_principal)
+    t_a = jnp.where(breaking, lax.stop_gradient(t), t)
     reverse = s2 < 0
-    frame_moments = jnp.where(reverse, moments[::-1], moments)
-    frame_omega = jnp.where(reverse, jnp.stack([w3, w2, -w1]), w)
+    frame_moments = jnp.where(reverse, moments_a[::-1], moments_a)
+    frame_omega = jnp.where(reverse, jnp.stack([w_a[2], w_a[1], -w_a[0]]), w_a)
     to_frame = jnp.where(reverse, jnp.array(_TO_REVERSED, dtype), jnp.array(_IDENTITY, dtype))
-    q_frame = quat.multiply(q_principal, to_frame)
-    # The case-A formulas also hold for a symmetric top (m = n = 0): they are
-    # evaluated there too and give the derivatives (with respect to an inertia
-    # perturbation that breaks the symmetry as well); the closed form gives the value.
+    q_frame = quat.multiply(q_a, to_frame)
     q_asym, omega_asym = _asymmetric(
         q_frame,
-        jnp.where(steady, jnp.array(_STANDIN_OMEGA, dtype), frame_omega),
-        jnp.where(steady, jnp.array(_STANDIN_MOMENTS, dtype), frame_moments),
-        t,
+        jnp.where(standin, jnp.array(_STANDIN_OMEGA, dtype), frame_omega),
+        jnp.where(standin, jnp.array(_STANDIN_MOMENTS, dtype), frame_moments),
+        t_a,
     )
     q_asym = quat.multiply(q_asym, quat.conjugate(to_frame))
-    q_sym = jnp.where(symmetric & ~steady, q_asym + lax.stop_gradient(q_sym - q_asym), q_sym)
-    omega_sym = jnp.where(
-        symmetric & ~steady, omega_asym + lax.stop_gradient(omega_sym - omega_asym), omega_sym
-    )
+    q_sym = jnp.where(breaking, q_sym + (q_asym - lax.stop_gradient(q_asym)), q_sym)
+    omega_sym = jnp.where(breaking, omega_sym + (omega_asym - lax.stop_gradient(omega_asym)), omega_sym)
 
     q_out = jnp.where(closed_form, q_sym, q_asym)
     omega_out = jnp.where(closed_form, omega_sym, omega_asym)
+    q_out = jnp.where(short, q_short, q_out)
+    omega_out = jnp.where(short, quat.rotate(quat.normalize(q_short), w_short), omega_out)
     return quat.normalize(q_out), omega_out
 
 

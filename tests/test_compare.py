@@ -2,49 +2,58 @@
 
 import csv
 import json
+import math
 import subprocess
 import sys
+from typing import ClassVar
 
+import diffrax
+import jax
 import jax.numpy as jnp
 import pytest
 
 import jaxrot
-from jaxrot import quaternion as quat
-from jaxrot._compare import compare, fit_order, measured_orders
+from jaxrot import comparison, quaternion as quat
+from jaxrot._reference import adaptive_solve
+from jaxrot.comparison import (
+    ADAPTIVE_SOLVERS,
+    compare,
+    fit_order,
+    format_recommendation,
+    measured_orders,
+    recommend,
+)
+from jaxrot.schemes.euler import Euler
 
 
 def test_cli_runs_end_to_end_and_writes_table_csv_json_png(tmp_path):
     out = tmp_path / "out"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "jaxrot",
-            "compare",
-            "--coarse-steps",
-            "20",
-            "--levels",
-            "3",
-            "--repeats",
-            "1",
-            "--t-end",
-            "1.0",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    # fmt: off
+    command = [
+        sys.executable, "-m", "jaxrot", "compare", "--coarse-steps", "20", "--levels", "3", "--repeats", "1",
+        "--t-end", "1.0", "--particles", "3", "--dtype", "float32", "--schemes", "zhao,euler",
+        "--solvers", "diffrax_tsit5", "--tolerances", "1e-3,1e-5", "--out", str(out),
+    ]
+    # fmt: on
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
-    assert "max q err [rad]" in proc.stdout
+    assert "max q err[rad]" in proc.stdout
+    assert "fastest within error budget" in proc.stdout
     rows = list(csv.DictReader((out / "compare.csv").read_text().splitlines()))
-    # Every registered scheme gets its rows with no change to the compare code.
-    assert [r["scheme"] for r in rows] == [name for name in jaxrot.SCHEMES for _ in range(3)]
-    assert [int(r["n_steps"]) for r in rows] == [20, 40, 80] * len(jaxrot.SCHEMES)
-    for name in jaxrot.SCHEMES:
+    fixed = [r for r in rows if r["kind"] == "fixed"]
+    assert [r["method"] for r in fixed] == ["zhao"] * 3 + ["euler"] * 3
+    assert [int(r["n_steps"]) for r in fixed] == [20, 40, 80] * 2
+    adaptive = [r for r in rows if r["kind"] == "adaptive"]
+    tolerances = [(r["method"], float(r["tol"])) for r in adaptive]
+    assert tolerances == [("diffrax_tsit5", 1e-3), ("diffrax_tsit5", 1e-5)]
+    assert {r["dtype"] for r in rows} == {"float32"} and {r["particles"] for r in rows} == {"3"}
+    for r in rows:
+        for column in ("max_orientation_error_rad", "rel_energy_drift", "us_per_particle_step", "compile_s"):
+            assert math.isfinite(float(r[column])) and float(r[column]) >= 0, (r["method"], column)
+    for name in ("zhao", "euler"):
         assert f"measured order ({name})" in proc.stdout
-    assert json.loads((out / "compare.json").read_text())["machine"]["jax"]
+    saved = json.loads((out / "compare.json").read_text())
+    assert saved["machine"]["jax"] and saved["recommendation"]
     assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -59,27 +68,169 @@ def test_cli_rejects_an_unknown_scene():
     assert "heavy_top" in proc.stderr
 
 
-def test_error_column_equals_an_independent_computation():
-    rows = compare("heavy_top", t_end=1.0, coarse_steps=10, levels=2, repeats=1, progress=False)
-    scene = jaxrot.SCENES["heavy_top"]()
-    row = rows[1]
-    traj = jaxrot.rollout(
-        "zhao", scene.state, scene.inertia, row["dt"], row["n_steps"], torque=scene.torque, args=scene.args
+@pytest.fixture(scope="module")
+def small_rows():
+    return {
+        dtype: compare(
+            "heavy_top",
+            t_end=1.0,
+            particles=2,
+            dtype=dtype,
+            coarse_steps=10,
+            levels=2,
+            tolerances=(1e-5,),
+            repeats=1,
+            progress=False,
+            schemes=["zhao"],
+            solvers=["diffrax_tsit5"],
+        )
+        for dtype in ("float64", "float32")
+    }
+
+
+class _Registered(Euler):
+    name: ClassVar[str] = "registered_later"
+
+
+def test_a_newly_registered_scheme_gets_its_rows_with_no_other_change(monkeypatch):
+    """By default every scheme in SCHEMES and every adaptive solver gets its rows."""
+    registry = {"euler": jaxrot.SCHEMES["euler"], "registered_later": _Registered()}
+    monkeypatch.setattr(comparison, "SCHEMES", registry)
+    rows = compare(
+        t_end=0.2, particles=1, coarse_steps=5, levels=2, tolerances=(1e-4,), repeats=1, progress=False
     )
+    expected = [(name, "fixed") for name in registry for _ in range(2)]
+    expected += [(name, "adaptive") for name in ADAPTIVE_SOLVERS]
+    assert [(r["method"], r["kind"]) for r in rows] == expected
+    assert [r["n_steps"] for r in rows if r["kind"] == "fixed"] == [5, 10, 5, 10]
+    assert "measured order (registered_later)" in comparison.format_table(rows)
+
+
+def _independent_energy_drift(scene, traj):
+    q, omega = traj.q.astype(jnp.float64), traj.omega.astype(jnp.float64)
+    args = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64), scene.args["gravity"])
+    inertia = scene.inertia.astype(jnp.float64)
+    energies = [
+        0.5 * jnp.sum(omega_b * inertia * omega_b)
+        - jnp.dot(args["weight"], quat.rotate(qi, args["offset_body"]))
+        for qi, wi in zip(q, omega, strict=True)
+        for omega_b in [quat.rotate(quat.conjugate(qi), wi)]
+    ]
+    energies = jnp.stack(energies)
+    return float(jnp.max(jnp.abs(energies - energies[0])) / jnp.abs(energies[0]))
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_error_columns_equal_an_independent_computation(small_rows, dtype):
+    scene = jaxrot.SCENES["heavy_top"](getattr(jnp, dtype))
+    row = small_rows[dtype][1]
+    assert (row["method"], row["n_steps"]) == ("zhao", 20)
+    # The same program as compare(): two vmapped particles in a jitted rollout saving every 2nd step.
+    # (Eagerly, or for one particle alone, XLA emits different code: float32 then differs by ~3 ulp.)
+    batch = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), scene.state)
+
+    def run(state, save_every):
+        return jaxrot.rollout(
+            "zhao", state, scene.inertia, row["dt"], row["n_steps"], torque=scene.torque, args=scene.args,
+            save_every=save_every,
+        )  # fmt: skip
+
+    traj = jax.jit(run, static_argnums=1)(batch, 2)
+    assert traj.q.dtype == getattr(jnp, dtype)
+    traj = jaxrot.Trajectory(traj.t, traj.q[:, 0], traj.omega[:, 0])
+    ref_scene = jaxrot.SCENES["heavy_top"]()
     ref = jaxrot.reference_rollout(
-        scene.state, scene.inertia, traj.t, torque=scene.torque, args=scene.args, rtol=1e-13, atol=1e-13
+        ref_scene.state, ref_scene.inertia, jnp.linspace(0.0, 1.0, 21), torque=ref_scene.torque,
+        args=ref_scene.args, rtol=1e-13, atol=1e-13,
+    )  # fmt: skip
+    coarse_ref = jaxrot.Trajectory(ref.t[::2], ref.q[::2], ref.omega[::2])
+    q = traj.q.astype(jnp.float64)
+    assert row["max_orientation_error_rad"] == pytest.approx(
+        float(jnp.max(quat.angle_between(q, coarse_ref.q))), rel=1e-12
     )
-    every_step = float(jnp.max(quat.angle_between(traj.q, ref.q)))
+    final = float(jnp.linalg.norm(traj.omega[-1].astype(jnp.float64) - ref.omega[-1]))
+    assert row["final_omega_error"] == pytest.approx(final, rel=1e-12)
+    assert row["rel_energy_drift"] == pytest.approx(_independent_energy_drift(ref_scene, traj), rel=1e-9)
     # compare() samples the error at the coarse grid only; the maximum over every step can only be larger.
-    on_coarse_grid = float(jnp.max(quat.angle_between(traj.q[::2], ref.q[::2])))
-    assert row["max_orientation_error_rad"] == pytest.approx(on_coarse_grid, rel=1e-9)
-    assert row["max_orientation_error_rad"] <= every_step * (1 + 1e-9)
+    every = jax.jit(run, static_argnums=1)(batch, 1)
+    every_step = float(jnp.max(quat.angle_between(every.q[:, 0].astype(jnp.float64), ref.q)))
+    assert row["max_orientation_error_rad"] <= every_step * (1 + 1e-12)
     assert row["torque_evals"] == 2 * row["n_steps"]
+
+
+def test_adaptive_rows_equal_a_direct_diffrax_solve(small_rows):
+    row = next(r for r in small_rows["float64"] if r["method"] == "diffrax_tsit5")
+    scene = jaxrot.SCENES["heavy_top"]()
+    ts = jnp.linspace(0.0, 1.0, 11)
+    ref = jaxrot.reference_rollout(
+        scene.state, scene.inertia, ts, torque=scene.torque, args=scene.args, rtol=1e-13, atol=1e-13
+    )
+    omega_b0 = quat.rotate(quat.conjugate(scene.state.q), scene.state.omega)
+    inertia = scene.inertia
+
+    def field(t, y, args):
+        q, w = y
+        q_unit = q / jnp.linalg.norm(q)
+        tau_b = quat.rotate(quat.conjugate(q_unit), scene.torque(t, q_unit, quat.rotate(q_unit, w), args))
+        return 0.5 * quat.multiply(q, quat.pure(w)), (tau_b - jnp.cross(w, inertia * w)) / inertia
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, 1.0, None, (scene.state.q, omega_b0), args=scene.args,
+        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=1e-5, atol=1e-5),
+    )  # fmt: skip
+    q = sol.ys[0] / jnp.linalg.norm(sol.ys[0], axis=-1, keepdims=True)
+    assert row["max_orientation_error_rad"] == pytest.approx(
+        float(jnp.max(quat.angle_between(q, ref.q))), rel=1e-6
+    )
+    assert row["n_steps"] == int(sol.stats["num_steps"])
+
+
+@pytest.mark.parametrize("name", list(ADAPTIVE_SOLVERS))
+def test_adaptive_torque_evals_are_the_counted_calls(name):
+    scene = jaxrot.SCENES["heavy_top"]()
+    calls = []
+
+    def counted(t, q, omega, args):
+        jax.debug.callback(lambda: calls.append(1))
+        return scene.torque(t, q, omega, args)
+
+    solver, _, per_step = ADAPTIVE_SOLVERS[name]
+    ts = jnp.linspace(0.0, 1.0, 5)
+    *_, steps = adaptive_solve(
+        solver(), scene.state.q[None], scene.state.omega[None], scene.inertia, False, ts, counted, scene.args,
+        1e-6, 1e-6, 10_000,
+    )  # fmt: skip
+    jax.effects_barrier()
+    assert len(calls) == per_step * int(steps[0]) + 1
+
+
+def test_recommendation_is_the_fastest_row_within_each_budget():
+    rows = [
+        {"method": "a", "kind": "fixed", "dt": 0.1, "max_orientation_error_rad": 5e-2,
+         "us_per_particle_run": 1.0},
+        {"method": "a", "kind": "fixed", "dt": 0.05, "max_orientation_error_rad": 5e-3,
+         "us_per_particle_run": 2.0},
+        {"method": "b", "kind": "adaptive", "tol": 1e-6, "max_orientation_error_rad": 4e-4,
+         "us_per_particle_run": 1.5},
+    ]  # fmt: skip
+    picks = dict(recommend(rows))
+    assert picks[1e-1]["us_per_particle_run"] == 1.0
+    assert picks[1e-2]["method"] == "b"  # within budget and faster than a at dt = 0.05
+    assert picks[1e-3]["method"] == "b"
+    assert picks[1e-4] is None
+    assert "≤1e-04: none" in format_recommendation(rows)
+
+
+def test_compare_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="dtype"):
+        compare(dtype="float16", progress=False)
+    with pytest.raises(ValueError, match="particles"):
+        compare(particles=0, progress=False)
 
 
 def test_measured_orders_skip_saturated_rungs():
     rows = [
-        {"scheme": "zhao", "dt": dt, "max_orientation_error_rad": err}
+        {"method": "zhao", "kind": "fixed", "dt": dt, "max_orientation_error_rad": err}
         for dt, err in [(0.4, 3.0), (0.2, 0.08), (0.1, 0.02), (0.05, 0.005)]
     ]
     assert measured_orders(rows)["zhao"] == pytest.approx(2.0, abs=1e-12)

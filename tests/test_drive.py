@@ -7,7 +7,7 @@ from helpers import MOMENTS, gravity_args, principal_state
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 
 
 SCHEME_NAMES = list(jaxrot.SCHEMES)

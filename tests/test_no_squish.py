@@ -6,7 +6,7 @@ from helpers import MOMENTS, PRINCIPAL_TO_BODY, full_tensor, gravity_args, princ
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 
 
 NO_SQUISH = jaxrot.SCHEMES["no_squish"]

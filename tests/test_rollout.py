@@ -8,7 +8,7 @@ from helpers import MOMENTS, central_difference_grad, full_tensor, gravity_args,
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 
 
 STATE = principal_state(omega_body=jnp.array([1.0, 2.0, 0.5]))

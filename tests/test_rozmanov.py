@@ -6,7 +6,7 @@ import pytest
 from helpers import MOMENTS, gravity_args, principal_state
 
 import jaxrot
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 from jaxrot.schemes import Rozmanov
 
 

@@ -18,7 +18,7 @@ from helpers import (
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._scenes import gravity_torque, heavy_top
+from jaxrot.scenes import gravity_torque, heavy_top
 from jaxrot.schemes import Rozmanov
 
 

@@ -17,7 +17,7 @@ from helpers import (
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 from jaxrot.schemes.splitting import Splitting
 
 

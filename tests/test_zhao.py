@@ -17,7 +17,7 @@ from helpers import (
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._scenes import gravity_torque
+from jaxrot.scenes import gravity_torque
 
 
 ZHAO = jaxrot.SCHEMES["zhao"]

@@ -92,6 +92,21 @@ class Rozmanov(AbstractScheme):
     max_iter: int = 8
     tol: float | None = None
 
+    def __check_init__(self):
+        if (
+            isinstance(self.max_iter, bool)
+            or not isinstance(self.max_iter, (int, np.integer))
+            or self.max_iter < 1
+        ):
+            raise ValueError(f"`max_iter` must be a Python int >= 1; got {self.max_iter!r}.")
+        if self.tol is not None and (
+            isinstance(self.tol, bool)
+            or not isinstance(self.tol, (int, float, np.floating))
+            or not np.isfinite(self.tol)
+            or self.tol <= 0
+        ):
+            raise ValueError(f"`tol` must be None or a finite float > 0; got {self.tol!r}.")
+
     def _tol(self, dtype):
         if self.tol is not None:
             return self.tol
@@ -111,12 +126,15 @@ class Rozmanov(AbstractScheme):
         q0 = carry.state.q
         to_body = quat.conjugate(q0)
         half = 0.5 * dt
-        l_half = carry.angular_momentum + half * carry.torque
+        free = torque is None  # a torque-free body skips the (zero) kicks altogether
+        l_half = carry.angular_momentum if free else carry.angular_momentum + half * carry.torque
 
         l_body = quat.rotate(to_body, carry.angular_momentum)
-        t_body = quat.rotate(to_body, carry.torque)
         omega_body = inertia.solve(l_body)
-        l_body_half = l_body + half * (t_body - jnp.cross(omega_body, l_body))
+        l_body_rate = -jnp.cross(omega_body, l_body)
+        if not free:
+            l_body_rate = l_body_rate + quat.rotate(to_body, carry.torque)
+        l_body_half = l_body + half * l_body_rate
         q_half = quat.normalize(q0 + half * 0.5 * quat.multiply(q0, quat.pure(inertia.solve(l_body_half))))
 
         def rate_at(q_h):
@@ -139,7 +157,7 @@ class Rozmanov(AbstractScheme):
         q1 = quat.normalize(q0 + dt * rate_at(q_half))
         omega_pred = _world_omega(q1, l_half, inertia)
         t1 = _world_torque(torque, t + dt, q1, omega_pred, args)
-        l1 = l_half + half * t1
+        l1 = l_half if free else l_half + half * t1
         return RozmanovCarry(
             RotState(q1, _world_omega(q1, l1, inertia)),
             l1,

@@ -1,0 +1,394 @@
+"""The speed/accuracy comparison behind ``python -m jaxrot compare``.
+
+Example:
+    >>> import jax; jax.config.update("jax_enable_x64", True)
+    >>> from jaxrot import comparison
+    >>> rows = comparison.compare(t_end=0.5, particles=2, coarse_steps=10, levels=2, schemes=["zhao"],
+    ...                           solvers=["diffrax_tsit5"], tolerances=(1e-6,), repeats=1, progress=False)
+    >>> [(r["method"], r["n_steps"]) for r in rows]
+    [('zhao', 10), ('zhao', 20), ('diffrax_tsit5', 9)]
+    >>> print(comparison.format_recommendation(rows))  # doctest: +ELLIPSIS
+    fastest within error budget [rad] ...
+
+Every scheme in `SCHEMES` runs on one scene at a ladder of time steps, and the
+generic alternative (diffrax Tsit5 and Dopri8 with adaptive steps) at a ladder
+of tolerances. Each run is timed over ``particles`` vmapped copies of the
+scene's body and its first particle is compared with a tight diffrax reference.
+A new scheme gets its rows with no change here.
+"""
+
+import csv
+import json
+import math
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm import tqdm
+
+from . import quaternion as quat
+from ._particles import flatten_particles, split_per_body
+from ._reference import adaptive_solve, reference_rollout
+from ._rollout import rollout
+from ._validation import check_bodies
+from .scenes import SCENES
+from .schemes import SCHEMES
+
+
+REFERENCE_TOL = 1e-13
+DTYPES = {"float32": jnp.float32, "float64": jnp.float64}
+
+# Generic adaptive solvers: (constructor, nominal order, torque calls per attempted step).
+# A solve makes ``calls_per_step * steps + 1`` calls (Tsit5 reuses its last stage, FSAL);
+# tests/test_compare.py counts them.
+ADAPTIVE_SOLVERS = {
+    "diffrax_tsit5": (diffrax.Tsit5, 5, 6),
+    "diffrax_dopri8": (diffrax.Dopri8, 8, 13),
+}
+TOLERANCES = {"float64": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11), "float32": (1e-3, 1e-4, 1e-5, 1e-6)}
+ASYMPTOTIC_ERROR = 0.1  # rad; above this the error saturates and says nothing about the order
+
+
+def orientation_error(q, q_ref):
+    """Largest geodesic angle (radians) between two orientation histories ``(n, ..., 4)``."""
+    return float(jnp.max(quat.angle_between(jnp.asarray(q, jnp.float64), jnp.asarray(q_ref, jnp.float64))))
+
+
+def relative_energy_drift(scene, q, omega):
+    """``max_t |E(t) − E(0)| / |E(0)|`` of the scene's total energy (`Scene.energy`), in float64.
+
+    ``q`` ``(n, *bodies, 4)``, ``omega`` ``(n, *bodies, 3)`` for a float64
+    ``scene``; None when the scene's torque is not conservative.
+    """
+    energy = scene.energy(0.0, jnp.asarray(q, jnp.float64), jnp.asarray(omega, jnp.float64))
+    if energy is None:
+        return None
+    return float(jnp.max(jnp.abs(energy - energy[0])) / jnp.abs(energy[0]))
+
+
+def fit_order(dts, errors) -> float:
+    """Slope of log(error) against log(dt): the measured order of accuracy."""
+    slope, _ = np.polyfit(np.log(np.asarray(dts)), np.log(np.asarray(errors)), 1)
+    return float(slope)
+
+
+def time_compiled(fn, arg, repeats):
+    """Compile ``fn`` for ``arg``, then run it ``repeats`` times: (output, compile s, median run s).
+
+    Compilation is timed alone (``lower().compile()``); one untimed run follows it.
+    """
+    start = time.perf_counter()
+    compiled = jax.jit(fn).lower(arg).compile()
+    compile_s = time.perf_counter() - start
+    out = jax.block_until_ready(compiled(arg))
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(compiled(arg))
+        samples.append(time.perf_counter() - start)
+    return out, compile_s, statistics.median(samples)
+
+
+def compare(
+    scene="heavy_top",
+    *,
+    t_end=None,
+    particles=100,
+    dtype="float64",
+    coarse_steps=100,
+    levels=6,
+    tolerances=None,
+    schemes=None,
+    solvers=None,
+    repeats=3,
+    progress=True,
+):
+    """Run every scheme and the generic adaptive solvers against the diffrax reference.
+
+    The fixed-step ladder halves ``dt`` from ``t_end / coarse_steps`` ``levels``
+    times; the adaptive rows use each of ``tolerances`` (rtol = atol; default
+    `TOLERANCES` for the dtype). Errors are measured at the coarse grid's times
+    against Dopri8 at rtol = atol = 1e-13 in float64, whatever ``dtype`` runs.
+    ``schemes`` (names in `SCHEMES`) and ``solvers`` (names in
+    `ADAPTIVE_SOLVERS`) select rows; None means all.
+
+    Each row holds: ``method``, ``kind`` (``"fixed"`` or ``"adaptive"``), nominal
+    ``order``, ``dt`` or ``tol``, ``n_steps`` (attempted steps for adaptive
+    solvers), ``max_orientation_error_rad`` (geodesic), ``final_omega_error``
+    (rad/s, world frame), ``rel_energy_drift`` (`relative_energy_drift`),
+    ``torque_evals`` per particle over the horizon, ``us_per_particle_step`` and
+    ``us_per_particle_run`` (median compiled wall time over ``particles``
+    vmapped bodies, per particle-step and per particle over the whole horizon)
+    and ``compile_s``.
+    """
+    if scene not in SCENES:
+        raise ValueError(f"`scene` must be one of {sorted(SCENES)}; got {scene!r}.")
+    if dtype not in DTYPES:
+        raise ValueError(f"`dtype` must be one of {sorted(DTYPES)}; got {dtype!r}.")
+    for name, value in (("particles", particles), ("coarse_steps", coarse_steps), ("levels", levels)):
+        if not (isinstance(value, int) and value >= 1):
+            raise ValueError(f"`{name}` must be an integer >= 1; got {value!r}.")
+    if not (isinstance(repeats, int) and repeats >= 1):
+        raise ValueError(f"`repeats` must be an integer >= 1; got {repeats!r}.")
+    if not jax.config.jax_enable_x64:
+        raise ValueError(
+            'compare needs float64 for its reference: call jax.config.update("jax_enable_x64", True) first.'
+        )
+    tolerances = TOLERANCES[dtype] if tolerances is None else tuple(tolerances)
+    schemes = list(SCHEMES) if schemes is None else list(schemes)
+    solvers = list(ADAPTIVE_SOLVERS) if solvers is None else list(solvers)
+    for label, chosen, known in (("schemes", schemes, SCHEMES), ("solvers", solvers, ADAPTIVE_SOLVERS)):
+        unknown = [x for x in chosen if x not in known]
+        if unknown:
+            raise ValueError(f"`{label}` has unknown names {unknown}; known: {list(known)}.")
+    if not schemes and not solvers:
+        raise ValueError("`schemes` and `solvers` are both empty: nothing to compare.")
+    if dtype == "float32" and any(tol < 1e-6 for tol in tolerances):
+        raise ValueError(f"`tolerances` below 1e-6 cannot be met in float32; got {tolerances}.")
+    reference_scene = SCENES[scene](jnp.float64)
+    sc = SCENES[scene](DTYPES[dtype])
+    t_end = reference_scene.t_end if t_end is None else float(t_end)
+    if not t_end > 0:
+        raise ValueError(f"`t_end` must be > 0; got {t_end}.")
+    dt_coarse = t_end / coarse_steps
+    ts = jnp.arange(coarse_steps + 1, dtype=jnp.float64) * dt_coarse
+    rs = reference_scene
+    ref = reference_rollout(
+        rs.state, rs.inertia, ts, torque=rs.torque, args=rs.args, rtol=REFERENCE_TOL, atol=REFERENCE_TOL
+    )
+    single = sc.state.q.ndim == 1
+    if single:  # one body: time it over `particles` vmapped copies
+        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (particles, *x.shape)), sc.state)
+    else:  # the scene's own bodies (they may interact)
+        batch, particles = sc.state, sc.n_bodies
+    _, inertia, per_particle = check_bodies(batch, sc.inertia)
+    batch_shape = batch.q.shape[:-1]
+    _, inertia = flatten_particles(batch, inertia, per_particle)
+    flat_args, args_axes = split_per_body(sc.args, () if single else batch_shape)
+
+    def accuracy(q, omega):
+        if single:
+            q, omega = q[:, 0], omega[:, 0]
+        omega_gap = jnp.asarray(omega[-1], jnp.float64) - ref.omega[-1]
+        return {
+            "max_orientation_error_rad": orientation_error(q, ref.q),
+            "final_omega_error": float(jnp.max(jnp.linalg.norm(omega_gap, axis=-1))),
+            "rel_energy_drift": relative_energy_drift(rs, q, omega),
+        }
+
+    common = {"scene": scene, "dtype": dtype, "particles": particles}
+    jobs = [("fixed", name, k) for name in schemes for k in range(levels)]
+    jobs += [("adaptive", name, tol) for name in solvers for tol in tolerances]
+    rows = []
+    for kind, name, level in tqdm(jobs, desc="compare", disable=not progress, leave=False):
+        if kind == "fixed":
+            scheme = SCHEMES[name]
+            factor = 2**level
+            dt, n_steps = dt_coarse / factor, coarse_steps * factor
+
+            def run(state, scheme=scheme, dt=dt, n_steps=n_steps, factor=factor):
+                return rollout(
+                    scheme, state, sc.inertia, dt, n_steps, torque=sc.torque, args=sc.args, save_every=factor
+                )
+
+            traj, compile_s, seconds = time_compiled(run, batch, repeats)
+            evals = 0 if sc.torque is None else scheme.torque_evals_per_step * n_steps
+            evals += 0 if sc.torque is None else scheme.torque_evals_at_init
+            row = {"method": name, "kind": kind, "order": scheme.order, "dt": dt, "tol": None}
+        else:
+            solver, order, calls_per_step = ADAPTIVE_SOLVERS[name]
+
+            def run(state, solver=solver, tol=level):
+                q, omega = state.q.reshape(-1, 4), state.omega.reshape(-1, 3)
+                traj, result, steps = adaptive_solve(
+                    solver(), q, omega, inertia, per_particle, ts.astype(q.dtype),
+                    sc.torque, flat_args, tol, tol, 1_000_000, args_axes,
+                )  # fmt: skip
+                shape = (len(ts), *state.q.shape[:-1])
+                return (
+                    traj._replace(q=traj.q.reshape(*shape, 4), omega=traj.omega.reshape(*shape, 3)),
+                    result,
+                    steps,
+                )
+
+            (traj, result, steps), compile_s, seconds = time_compiled(run, batch, repeats)
+            if np.any(np.asarray(result != diffrax.RESULTS.successful)):
+                raise RuntimeError(f"compare: {name} failed at tol={level:g}; use looser tolerances.")
+            mean_steps = float(np.mean(np.asarray(steps)))  # bodies of a cloud take different steps
+            n_steps = int(round(mean_steps))
+            evals = int(round(calls_per_step * mean_steps)) + 1
+            row = {"method": name, "kind": kind, "order": order, "dt": None, "tol": level}
+        rows.append(
+            {
+                **common,
+                **row,
+                "n_steps": n_steps,
+                **accuracy(traj.q, traj.omega),
+                "torque_evals": evals,
+                "us_per_particle_step": seconds / (particles * max(n_steps, 1)) * 1e6,
+                "us_per_particle_run": seconds / particles * 1e6,
+                "compile_s": compile_s,
+            }
+        )
+    return rows
+
+
+def measured_orders(rows) -> dict:
+    """Per fixed-step scheme, the fitted order over the rungs with error below `ASYMPTOTIC_ERROR`.
+
+    None when fewer than three rungs qualify.
+    """
+    orders = {}
+    fixed = [r for r in rows if r.get("kind", "fixed") == "fixed"]
+    for name in dict.fromkeys(r["method"] for r in fixed):
+        mine = [r for r in fixed if r["method"] == name and r["max_orientation_error_rad"] < ASYMPTOTIC_ERROR]
+        errors = [r["max_orientation_error_rad"] for r in mine]
+        orders[name] = fit_order([r["dt"] for r in mine], errors) if len(mine) >= 3 else None
+    return orders
+
+
+def setting_label(row) -> str:
+    """``dt=…`` for a fixed-step row, ``tol=…`` for an adaptive one."""
+    return f"dt={row['dt']:.3g}" if row["kind"] == "fixed" else f"tol={row['tol']:.0e}"
+
+
+def recommend(rows, budgets=None):
+    """For each error budget (rad), the row that meets it at the least wall time per particle.
+
+    Default budgets: every decade from 1e-1 down to the smallest error on the
+    table. Returns a list of ``(budget, row or None)``.
+    """
+    if budgets is None:
+        smallest = min(r["max_orientation_error_rad"] for r in rows)
+        lowest = math.floor(math.log10(max(smallest, 1e-16)))
+        budgets = [10.0**e for e in range(-1, lowest - 1, -1)] if lowest <= -1 else [1e-1]
+    picks = []
+    for budget in budgets:
+        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        picks.append((budget, min(ok, key=lambda r: r["us_per_particle_run"]) if ok else None))
+    return picks
+
+
+def format_recommendation(rows) -> str:
+    parts = []
+    for budget, row in recommend(rows):
+        if row is None:
+            parts.append(f"≤{budget:.0e}: none")
+        else:
+            parts.append(
+                f"≤{budget:.0e}: {row['method']} {setting_label(row)} ({row['us_per_particle_run']:.3g} µs)"
+            )
+    return "fastest within error budget [rad] (µs per particle over the horizon): " + "; ".join(parts)
+
+
+def _maybe(x):
+    return "—" if x is None else f"{x:.2e}"
+
+
+def format_table(rows) -> str:
+    header = (
+        f"{'method':<15} {'dt | tol':>12} {'steps':>7} {'max q err[rad]':>14} {'|Δω| final':>10} "
+        f"{'rel ΔE':>9} {'torque ev':>9} {'µs/p-step':>9} {'µs/part.':>9} {'compile s':>9}"
+    )
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        lines.append(
+            f"{r['method']:<15} {setting_label(r):>12} {r['n_steps']:>7d} "
+            f"{r['max_orientation_error_rad']:>14.3e} "
+            f"{r['final_omega_error']:>10.2e} {_maybe(r['rel_energy_drift']):>9} {r['torque_evals']:>9d} "
+            f"{r['us_per_particle_step']:>9.4f} {r['us_per_particle_run']:>9.3g} {r['compile_s']:>9.2f}"
+        )
+    for name, order in measured_orders(rows).items():
+        fitted = f"n/a: fewer than 3 rungs below {ASYMPTOTIC_ERROR} rad" if order is None else f"{order:.3f}"
+        lines.append(f"measured order ({name}): {fitted} (nominal {SCHEMES[name].order})")
+    lines.append(format_recommendation(rows))
+    return "\n".join(lines)
+
+
+def machine_info() -> dict:
+    import diffrax as _diffrax
+
+    return {
+        "machine": platform.machine(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "diffrax": _diffrax.__version__,
+        "backend": jax.default_backend(),
+        "device": str(jax.devices()[0].device_kind),
+    }
+
+
+def write_outputs(rows, out_dir, plot=True) -> list[Path]:
+    """Write ``compare.csv``, ``compare.json`` and (optionally) ``compare.png`` to ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = [out / "compare.csv", out / "compare.json"]
+    with open(written[0], "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    recommendation = [
+        {"budget_rad": b, "method": r and r["method"], "setting": r and setting_label(r)}
+        for b, r in recommend(rows)
+    ]
+    with open(written[1], "w") as f:
+        json.dump(
+            {
+                "machine": machine_info(),
+                "orders": measured_orders(rows),
+                "recommendation": recommendation,
+                "rows": rows,
+            },
+            f,
+            indent=2,
+        )
+    if plot:
+        written.append(plot_work_precision(rows, out / "compare.png"))
+    return written
+
+
+def plot_work_precision(rows, path=None, axes=None):
+    """Work-precision plot: error against wall time per particle and against torque evaluations.
+
+    Log-log, one line per method (fixed-step schemes solid, adaptive diffrax
+    dashed). Saves to ``path`` when given; draws on ``axes`` (two Axes) when given.
+    """
+    import matplotlib
+
+    if axes is None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = None
+    if axes is None:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    ax_time, ax_evals = axes
+    for name in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == name]
+        style = "o-" if mine[0]["kind"] == "fixed" else "s--"
+        err = [r["max_orientation_error_rad"] for r in mine]
+        ax_time.loglog([r["us_per_particle_run"] for r in mine], err, style, label=name)
+        ax_evals.loglog([max(r["torque_evals"], 1) for r in mine], err, style, label=name)
+    first = rows[0]
+    ax_time.set(
+        xlabel="wall time per particle over the horizon [µs]",
+        ylabel="max orientation error [rad]",
+        title=f"{first['scene']}, {first['dtype']}, {first['particles']} particles",
+    )
+    ax_evals.set(xlabel="torque evaluations per particle", ylabel="max orientation error [rad]")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+    ax_evals.legend(fontsize="small")
+    if path is not None:
+        (fig or ax_time.figure).savefig(path, dpi=120)
+    if fig is not None:
+        plt.close(fig)
+    return path

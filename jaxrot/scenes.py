@@ -1,0 +1,298 @@
+"""Built-in scenes: bodies, initial state, torque model, drives, a suggested step and horizon.
+
+A `Scene` declares what is simulated and nothing more: a torque-free scene has
+``torque=None`` and no torque is ever evaluated; diagonal inertia (principal
+moments) takes the fast path with no 3×3 products; a scene without drives runs
+no drive code. `SCENES` maps names to factories ``factory(dtype=float64) ->
+Scene``; ``python -m jaxrot compare --scene NAME`` runs any of them and
+``--list-scenes`` lists them. Units are SI (kg m², rad/s, N m, s, A m², T)
+except in `dipole_cloud`, which uses reduced units (μ₀/4π = 1).
+
+Example:
+    >>> import jaxrot
+    >>> scene = jaxrot.SCENES["viscous_drag"]()
+    >>> traj = jaxrot.rollout("zhao", scene.state, scene.inertia, scene.dt, 100, torque=scene.torque,
+    ...                       args=scene.args)
+    >>> traj.q.shape
+    (101, 4)
+"""
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import quaternion as quat
+from ._particles import per_body
+from ._state import RotState
+from .torques import DipoleInteraction, Gravity, RotatingField, UniformField, ViscousDrag
+
+
+class Scene(NamedTuple):
+    """A rotation problem.
+
+    Attributes:
+        name: key in `SCENES`.
+        description: one line of physics.
+        state: initial `RotState`; leading axes are bodies (none for one body).
+        inertia: body-frame principal moments ``(3,)`` / tensor ``(3, 3)``, shared
+            or one per body, kg m².
+        torque: a `jaxrot.torques` model (or any torque callable), or None.
+        args: the torque's parameters.
+        dt: a suggested time step (s): second-order schemes reach about 1e-3 rad
+            over the horizon at this step.
+        t_end: the horizon (s).
+        drive: a `jaxrot.Drive`, or None.
+    """
+
+    name: str
+    description: str
+    state: RotState
+    inertia: Any
+    torque: Callable | None
+    args: Any
+    dt: float
+    t_end: float
+    drive: Any = None
+
+    @property
+    def n_bodies(self) -> int:
+        return int(np.prod(self.state.q.shape[:-1]))
+
+    def energy(self, t, q, omega):
+        """Total energy (J) of all bodies: kinetic plus the torque model's potential.
+
+        ``q`` ``(..., 4)`` and ``omega`` ``(..., 3)`` with the scene's body axes
+        last (any leading time axes); None when the torque is not conservative.
+        """
+        from .diagnostics import kinetic_energy
+
+        if self.torque is not None and not getattr(self.torque, "conservative", False):
+            return None
+        body_ndim = self.state.q.ndim - 1
+        kinetic = kinetic_energy(q, omega, self.inertia)
+        kinetic = jnp.sum(kinetic, axis=tuple(range(kinetic.ndim - body_ndim, kinetic.ndim)))
+        if self.torque is None:
+            return kinetic
+        flat_q = q.reshape(*q.shape[: q.ndim - 1 - body_ndim], -1, 4)
+        lead = flat_q.shape[:-2]
+        potential = jax.vmap(lambda qi: self.torque.energy(t, qi, self.args))(
+            flat_q.reshape(-1, *flat_q.shape[-2:])
+        )
+        return kinetic + potential.reshape(lead)
+
+
+def gravity_torque(t, q, omega, args):
+    """``r × F`` for ``args = {"offset_body": r_b, "weight": F}``: `torques.Gravity` as a plain function."""
+    return jnp.cross(quat.rotate(q, args["offset_body"]), args["weight"])
+
+
+def _f(x, dtype):
+    return jnp.asarray(x, dtype=dtype)
+
+
+def free_top(dtype=jnp.float64) -> Scene:
+    """Torque-free asymmetric top spun about its intermediate axis: the tennis-racket (Dzhanibekov) flip.
+
+    Inertia ``(1, 2, 3)`` kg m², ``ω_b = (0.01, 2, 0.01)`` rad/s: the spin about the
+    intermediate axis is unstable and flips over every ~6 s. Energy and world
+    angular momentum are conserved; `jaxrot.analytic.free_top` is the exact motion.
+    """
+    q0 = quat.identity(dtype=dtype)
+    return Scene(
+        "free_top",
+        "torque-free asymmetric top, intermediate-axis (tennis-racket) flip",
+        RotState(q0, _f([0.01, 2.0, 0.01], dtype)),
+        _f([1.0, 2.0, 3.0], dtype),
+        None,
+        None,
+        dt=0.01,
+        t_end=20.0,
+    )
+
+
+def _gravity_args(offset, dtype):
+    return {"gravity": {"offset_body": _f(offset, dtype), "weight": _f([0.0, 0.0, -9.81], dtype)}}
+
+
+def heavy_top(dtype=jnp.float64) -> Scene:
+    """Asymmetric heavy top: gravity on a centre of mass offset from a fixed pivot.
+
+    Inertia ``(1, 2, 3)`` kg m² about the pivot (principal axes = body axes),
+    centre of mass at ``(0.1, 0.05, 0.3)`` m in the body, weight ``(0, 0, −9.81)``
+    N (1 kg), spun mostly about the body z axis and tilted by about 0.37 rad.
+    The orientation-dependent torque makes the motion nutate and precess
+    chaotically. Energy is conserved.
+    """
+    q0 = quat.exp(_f([0.1, 0.2, 0.3], dtype))
+    return Scene(
+        "heavy_top",
+        "asymmetric heavy top, I=(1,2,3), gravity on an offset centre of mass",
+        RotState(q0, quat.rotate(q0, _f([0.3, 1.0, 6.0], dtype))),
+        _f([1.0, 2.0, 3.0], dtype),
+        Gravity(),
+        _gravity_args([0.1, 0.05, 0.3], dtype),
+        dt=0.005,
+        t_end=5.0,
+    )
+
+
+def lagrange_top(dtype=jnp.float64) -> Scene:
+    """Symmetric heavy (Lagrange) top: a fast spinning top precessing and nutating under gravity.
+
+    Inertia ``(2, 2, 1)`` kg m² about the pivot, centre of mass 0.25 m up the
+    symmetry axis, weight 9.81 N, tilted 0.3 rad, spin 25 rad/s about the axis.
+    Energy and the angular momentum components about the vertical and about the
+    symmetry axis are conserved.
+    """
+    q0 = quat.from_axis_angle(_f([1.0, 0.0, 0.0], dtype), _f(0.3, dtype))
+    return Scene(
+        "lagrange_top",
+        "symmetric heavy top, I=(2,2,1), spin 25 rad/s, tilted 0.3 rad",
+        RotState(q0, quat.rotate(q0, _f([0.0, 0.0, 25.0], dtype))),
+        _f([2.0, 2.0, 1.0], dtype),
+        Gravity(),
+        _gravity_args([0.0, 0.0, 0.25], dtype),
+        dt=0.002,
+        t_end=3.0,
+    )
+
+
+def _needle(dtype, tilt):
+    q0 = quat.from_axis_angle(_f([0.0, 1.0, 0.0], dtype), _f(tilt, dtype))
+    return q0, _f([1.0, 1.0, 0.2], dtype), _f([0.0, 0.0, 1.0], dtype)
+
+
+def dipole_field(dtype=jnp.float64) -> Scene:
+    """A magnetised needle (compass) in a uniform field: it swings about the field and spins.
+
+    Inertia ``(1, 1, 0.2)`` kg m², moment 1 A m² along the body z (needle) axis,
+    field ``(1, 0, 0)`` T, needle tilted 0.5 rad from the world z towards x
+    (1.07 rad from the field), spin 2 rad/s about the needle. Energy is conserved,
+    and so is the angular momentum component along the field.
+    """
+    q0, inertia, moment = _needle(dtype, 0.5)
+    return Scene(
+        "dipole_field",
+        "magnetic needle in a uniform 1 T field",
+        RotState(q0, quat.rotate(q0, _f([0.3, 0.0, 2.0], dtype))),
+        inertia,
+        UniformField(),
+        {"field": {"moment_body": moment, "field": _f([1.0, 0.0, 0.0], dtype)}},
+        dt=0.005,
+        t_end=10.0,
+    )
+
+
+def dipole_rotating_field(dtype=jnp.float64) -> Scene:
+    """A magnetised needle dragged by a field rotating in the xy plane at 0.5 rad/s.
+
+    The needle of `dipole_field` lying along world x, the field
+    ``B(t) = (cos 0.5t, sin 0.5t, 0)`` T: the needle follows the field with a lag
+    and oscillates about it. Time-dependent torque; energy is not conserved.
+    """
+    q0, inertia, moment = _needle(dtype, np.pi / 2)
+    field = {"moment_body": moment, "amplitude": _f(1.0, dtype), "angular_frequency": _f(0.5, dtype)}
+    return Scene(
+        "dipole_rotating_field",
+        "magnetic needle in a 1 T field rotating at 0.5 rad/s",
+        RotState(q0, quat.rotate(q0, _f([0.0, 0.0, 1.0], dtype))),
+        inertia,
+        RotatingField(),
+        {"rotating_field": field},
+        dt=0.005,
+        t_end=10.0,
+    )
+
+
+def viscous_drag(dtype=jnp.float64) -> Scene:
+    """A tumbling asymmetric body slowed by rotational drag ``τ = −c ω``.
+
+    Inertia ``(1, 2, 3)`` kg m², ``c = 0.2`` N m s, ``ω_b(0) = (0.3, 1, 6)`` rad/s.
+    A velocity-dependent torque: the kinetic energy decays at exactly
+    ``dE/dt = −c |ω|²``.
+    """
+    q0 = quat.exp(_f([0.1, 0.2, 0.3], dtype))
+    return Scene(
+        "viscous_drag",
+        "asymmetric body under viscous drag c = 0.2 N m s",
+        RotState(q0, quat.rotate(q0, _f([0.3, 1.0, 6.0], dtype))),
+        _f([1.0, 2.0, 3.0], dtype),
+        ViscousDrag(),
+        {"drag": {"coefficient": _f(0.2, dtype)}},
+        dt=0.005,
+        t_end=10.0,
+    )
+
+
+def dipole_cloud(dtype=jnp.float64, n_side=4, external_field=(0.0, 0.0, 0.5)) -> Scene:
+    """``n_side²`` magnetic needles pinned on a square grid, each turned by all the others' fields.
+
+    Reduced units: μ₀/4π = 1, grid spacing 1, moment 1 along each needle,
+    inertia ``(0.1, 0.1, 0.02)``, random initial orientations (seed 0) at rest,
+    plus a uniform ``external_field`` (pass zeros for none). The dipole–dipole
+    torque is coupled (`jaxrot.torques.DipoleInteraction`). Energy is conserved;
+    the total spin angular momentum changes by the external torque and by the
+    pins' reaction (see `DipoleInteraction`).
+    """
+    n = n_side * n_side
+    grid = np.stack(np.meshgrid(np.arange(n_side), np.arange(n_side), indexing="ij"), -1).reshape(n, 2)
+    positions = _f(np.concatenate([grid, np.zeros((n, 1))], axis=1), dtype)
+    q0 = quat.normalize(jax.random.normal(jax.random.PRNGKey(0), (n, 4), dtype=dtype))
+    moment = _f([0.0, 0.0, 1.0], dtype)
+    args = {
+        "dipoles": {"positions": positions, "moment_body": moment, "strength": _f(1.0, dtype)},
+        "field": {"moment_body": moment, "field": _f(external_field, dtype)},
+    }
+    return Scene(
+        "dipole_cloud",
+        f"{n} coupled magnetic needles on a grid (dipole–dipole torques), reduced units",
+        RotState(q0, jnp.zeros((n, 3), dtype)),
+        _f([0.1, 0.1, 0.02], dtype),
+        DipoleInteraction() + UniformField(),
+        args,
+        dt=0.002,
+        t_end=3.0,
+    )
+
+
+def tumbling_cloud(dtype=jnp.float64, n=256, seed=0) -> Scene:
+    """``n`` free asymmetric bodies with random inertia, orientation and spin (throughput).
+
+    Principal moments uniform in [1, 2] kg m² (always physical), orientations
+    uniform, ``ω_b`` normal with 2 rad/s per component. Torque-free: each body's
+    energy and world angular momentum are conserved.
+    """
+    k1, k2, k3 = jax.random.split(jax.random.PRNGKey(seed), 3)
+    moments = jax.random.uniform(k1, (n, 3), dtype=dtype, minval=1.0, maxval=2.0)
+    q0 = quat.normalize(jax.random.normal(k2, (n, 4), dtype=dtype))
+    omega_b = 2 * jax.random.normal(k3, (n, 3), dtype=dtype)
+    return Scene(
+        "tumbling_cloud",
+        f"{n} free bodies with random inertia, orientation and spin",
+        RotState(q0, quat.rotate(q0, omega_b)),
+        moments,
+        None,
+        None,
+        dt=0.005,
+        t_end=5.0,
+    )
+
+
+SCENES = {
+    f.__name__: f
+    for f in (
+        free_top,
+        heavy_top,
+        lagrange_top,
+        dipole_field,
+        dipole_rotating_field,
+        viscous_drag,
+        dipole_cloud,
+        tumbling_cloud,
+    )
+}
+
+__all__ = ["SCENES", "Scene", "gravity_torque", "per_body", *SCENES]
