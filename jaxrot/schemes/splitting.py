@@ -58,8 +58,8 @@ class Splitting(AbstractScheme):
     Accuracy: on the built-in ``heavy_top`` scene (t = 5, reference at 1e-13) the
     largest orientation error is 2.3e-5 rad at ``Δt = 0.01`` and 5.7e-6 at 0.005,
     against 1.4e-3 and 3.5e-4 for ``"zhao"``, with half the torque calls. Gradients
-    are finite everywhere, also at ``ω = 0``; the measure-zero inputs where they are
-    not the true derivatives are listed in `jaxrot.analytic`.
+    are finite and true everywhere, also at and near ``ω = 0`` (a body started at rest
+    under a torque) and near steady rotation; the limits are listed in `jaxrot.analytic`.
 
     Frames and shapes (one body; `jaxrot.rollout` vmaps): ``q`` ``(4,)`` scalar
     first, body → world; ``omega`` ``(3,)`` world; ``inertia`` body frame, ``(3,)``
