@@ -34,38 +34,43 @@ from tqdm import tqdm
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot.comparison import time_compiled
-from jaxrot.scenes import gravity_torque
+from jaxrot.scenes import heavy_top
 
 
-MOMENTS = (1.0, 2.0, 3.0)
-OFFSET = (0.1, 0.05, 0.3)
-WEIGHT = (0.0, 0.0, -9.81)
-OMEGA_BODY = (0.3, 1.0, 6.0)
 DT = 1e-3
 
 
 def bodies(n, dtype, seed=0):
-    """``n`` heavy tops with random orientations, spun about (0.3, 1, 6) rad/s in the body frame."""
-    key = jax.random.PRNGKey(seed)
-    q = quat.normalize(jax.random.normal(key, (n, 4), dtype=dtype))
-    omega = quat.rotate(q, jnp.broadcast_to(jnp.asarray(OMEGA_BODY, dtype), (n, 3)))
-    args = {"offset_body": jnp.asarray(OFFSET, dtype), "weight": jnp.asarray(WEIGHT, dtype)}
-    return jaxrot.RotState(q, omega), jnp.asarray(MOMENTS, dtype), args
+    """``n`` copies of the `heavy_top` scene's body, with random orientations and its body-frame spin."""
+    scene = heavy_top(dtype)
+    omega_body = quat.rotate(quat.conjugate(scene.state.q), scene.state.omega)
+    q = quat.normalize(jax.random.normal(jax.random.PRNGKey(seed), (n, 4), dtype=dtype))
+    omega = quat.rotate(q, jnp.broadcast_to(omega_body, (n, 3)))
+    return jaxrot.RotState(q, omega), scene
 
 
-def jaxrot_run(scheme, inertia, args, n_steps):
+def jaxrot_run(scheme, scene, n_steps):
     def run(state):
         traj = jaxrot.rollout(
-            scheme, state, inertia, DT, n_steps, torque=gravity_torque, args=args, save_every=n_steps
+            scheme,
+            state,
+            scene.inertia,
+            DT,
+            n_steps,
+            torque=scene.torque,
+            args=scene.args,
+            save_every=n_steps,
         )
         return traj.q[-1]
 
     return run
 
 
-def jax_md_run(inertia, args, n_steps):
+def jax_md_run(scene, n_steps):
     """jax_md NVE on the heavy-top potential; returns a function of a `RotState` batch → final q."""
     from jax_md import rigid_body, simulate, space
+
+    inertia, args = scene.inertia, scene.args["gravity"]
 
     def energy(body, **kwargs):
         r_world = rigid_body.quaternion_rotate(body.orientation, args["offset_body"])
@@ -124,10 +129,10 @@ def measure(ns, dtypes, schemes, work, repeats, peer):
     for dtype_name, n in tqdm(jobs, desc="throughput"):
         dtype = {"float32": jnp.float32, "float64": jnp.float64}[dtype_name]
         n_steps = int(np.clip(work // n, 10, 10_000))
-        state, inertia, args = bodies(n, dtype)
-        runs = {name: jaxrot_run(name, inertia, args, n_steps) for name in schemes}
+        state, scene = bodies(n, dtype)
+        runs = {name: jaxrot_run(name, scene, n_steps) for name in schemes}
         if peer:
-            runs["jax_md"] = jax_md_run(inertia, args, n_steps)
+            runs["jax_md"] = jax_md_run(scene, n_steps)
         finals = {}
         for name, run in runs.items():
             final_q, compile_s, seconds = time_compiled(run, state, repeats)

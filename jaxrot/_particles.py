@@ -87,7 +87,3 @@ def split_per_body(args, batch_shape):
     values = jax.tree_util.tree_map(value, args, is_leaf=is_per_body)
     axes = jax.tree_util.tree_map(lambda x: 0 if is_per_body(x) else None, args, is_leaf=is_per_body)
     return values, axes
-
-
-def has_per_body(args) -> bool:
-    return any(is_per_body(x) for x in jax.tree_util.tree_leaves(args, is_leaf=is_per_body))

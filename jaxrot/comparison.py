@@ -198,8 +198,8 @@ def compare(
                 )
 
             traj, compile_s, seconds = time_compiled(run, batch, repeats)
-            evals = 0 if sc.torque is None else scheme.torque_evals_per_step * n_steps
-            evals += 0 if sc.torque is None else scheme.torque_evals_at_init
+            per_step, at_init = scheme.torque_evals_per_step, scheme.torque_evals_at_init
+            evals = 0 if sc.torque is None else per_step * n_steps + at_init
             row = {"method": name, "kind": kind, "order": scheme.order, "dt": dt, "tol": None}
         else:
             solver, order, calls_per_step = ADAPTIVE_SOLVERS[name]

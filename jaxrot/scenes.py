@@ -27,6 +27,7 @@ import numpy as np
 from . import quaternion as quat
 from ._particles import per_body
 from ._state import RotState
+from .diagnostics import kinetic_energy
 from .torques import DipoleInteraction, Gravity, RotatingField, UniformField, ViscousDrag
 
 
@@ -67,8 +68,6 @@ class Scene(NamedTuple):
         ``q`` ``(..., 4)`` and ``omega`` ``(..., 3)`` with the scene's body axes
         last (any leading time axes); None when the torque is not conservative.
         """
-        from .diagnostics import kinetic_energy
-
         if self.torque is not None and not getattr(self.torque, "conservative", False):
             return None
         body_ndim = self.state.q.ndim - 1
@@ -76,12 +75,9 @@ class Scene(NamedTuple):
         kinetic = jnp.sum(kinetic, axis=tuple(range(kinetic.ndim - body_ndim, kinetic.ndim)))
         if self.torque is None:
             return kinetic
-        flat_q = q.reshape(*q.shape[: q.ndim - 1 - body_ndim], -1, 4)
-        lead = flat_q.shape[:-2]
-        potential = jax.vmap(lambda qi: self.torque.energy(t, qi, self.args))(
-            flat_q.reshape(-1, *flat_q.shape[-2:])
-        )
-        return kinetic + potential.reshape(lead)
+        bodies = q.reshape(-1, self.n_bodies, 4)  # one row of all bodies per leading index
+        potential = jax.vmap(lambda qi: self.torque.energy(t, qi, self.args))(bodies)
+        return kinetic + potential.reshape(kinetic.shape)
 
 
 def gravity_torque(t, q, omega, args):
