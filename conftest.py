@@ -3,8 +3,8 @@
 import os
 
 
-# Two fake CPU devices for sharding tests; must be set before the backend starts.
-os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
+# Four fake CPU devices for sharding tests; must be set before the backend starts.
+os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 
 import jax  # noqa: E402
 from hypothesis import settings  # noqa: E402

@@ -174,6 +174,18 @@ def table(rows, peer):
     return "\n".join(lines)
 
 
+def compile_table(rows):
+    """Seconds to trace, lower and compile each timed program (a whole `rollout`)."""
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    head = "| dtype | N | " + " | ".join(f"{m} compile [s]" for m in methods) + " |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for (dtype, n), group in _groups(rows):
+        by = {r["method"]: r for r in group}
+        cells = " | ".join(f"{by[m]['compile_s']:.2f}" for m in methods)
+        lines.append(f"| {dtype} | {n:.0e} | {cells} |")
+    return "\n".join(lines)
+
+
 def _groups(rows):
     keys = list(dict.fromkeys((r["dtype"], r["n"]) for r in rows))
     return [(k, [r for r in rows if (r["dtype"], r["n"]) == k]) for k in keys]
@@ -203,6 +215,7 @@ def main(argv=None):
         print('jax_md: not measured (pip install -e ".[peers]", needs jax != 0.10.2, e.g. Python 3.12)')
     rows = measure(sizes, dtypes, schemes, int(ns.work), ns.repeats, peer)
     print(table(rows, peer))
+    print(compile_table(rows))
     gaps = [r["max_angle_vs_no_squish_rad"] for r in rows if "max_angle_vs_no_squish_rad" in r]
     if gaps:
         print(

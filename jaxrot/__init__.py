@@ -17,6 +17,12 @@ from . import (
     stability as stability,
     torques as torques,
 )
+from ._chunked import (
+    Checkpoint as Checkpoint,
+    load_checkpoint as load_checkpoint,
+    rollout_chunks as rollout_chunks,
+    save_checkpoint as save_checkpoint,
+)
 from ._drive import Drive as Drive
 from ._fit import FitResult as FitResult, fit_inertia as fit_inertia
 from ._inertia import BodyInertia as BodyInertia, body_inertia as body_inertia

@@ -9,6 +9,7 @@ import numpy as np
 from . import quaternion as quat
 from ._inertia import body_inertia
 from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
+from ._sharding import particle_sharded
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_times, check_torque, is_concrete
 from .schemes._base import body_torque
@@ -28,6 +29,7 @@ def _vector_field(t, y, ctx):
     return q_dot, inertia.angular_acceleration(omega_b, tau_b)
 
 
+@particle_sharded
 def reference_rollout(
     state: RotState,
     inertia,

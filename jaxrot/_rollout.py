@@ -1,20 +1,25 @@
-"""`rollout`: one `lax.scan` over time, `vmap` over particles."""
+"""`rollout`: one `lax.scan` over time, `vmap` over particles, bodies in cache-sized blocks."""
 
+import math
 import warnings
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from . import _blocking
 from ._drive import check_drive, driven_step, driven_torque
 from ._inertia import body_inertia
 from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
 from ._runtime_check import check_in_graph, init_report, raise_if_bad, update_report
+from ._sharding import particle_sharded, particle_shards, shard_particles
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_count, check_dt, check_torque, is_concrete
 from .schemes import resolve_scheme
 
 
+@particle_sharded
 def rollout(
     scheme,
     state: RotState,
@@ -30,6 +35,8 @@ def rollout(
     normalize: bool = False,
     return_carry: bool = False,
     runtime_check: bool = False,
+    progress: bool = False,
+    chunk_steps: int | None = None,
 ):
     """Integrate rigid-body rotation with a fixed step and return the saved states.
 
@@ -61,6 +68,12 @@ def rollout(
             ``omega`` and for ``| |q| - 1 | > 1e-6``, and report the first bad step,
             its time and particle (see `jaxrot.IntegrationError`). Off by default:
             then nothing is traced and it costs nothing.
+        progress: show a `tqdm` progress bar (on stderr, counting steps), updated
+            between chunks of ``chunk_steps`` steps (default: about 100 chunks).
+        chunk_steps: run in chunks of this many steps (a positive multiple of
+            ``save_every``) via `jaxrot.rollout_chunks`, and concatenate them. The
+            result is bit for bit that of one call; chunks of one size compile
+            once. To save and resume a long run, use `jaxrot.rollout_chunks`.
 
     Returns:
         `Trajectory` with ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)``,
@@ -80,7 +93,8 @@ def rollout(
             ``grad`` the same message is raised when the compiled code runs, wrapped
             by jax in ``jax.errors.JaxRuntimeError``.
         ValueError: for a wrong shape, non-finite values, a non-unit ``q``, a
-            non-physical inertia, ``dt <= 0``, ``n_steps < 0`` or an unknown scheme,
+            non-physical inertia, ``dt <= 0``, ``n_steps < 0``, an unknown scheme or a
+            ``chunk_steps`` that is not a positive multiple of ``save_every``,
             before anything compiles. Value checks are skipped for traced inputs.
 
     Example:
@@ -89,11 +103,103 @@ def rollout(
         >>> traj = jaxrot.rollout("zhao", state, jnp.array([1.0, 2.0, 3.0]), 0.01, 100, save_every=10)
         >>> traj.q.shape
         (11, 4)
+        >>> chunked = jaxrot.rollout("zhao", state, jnp.array([1.0, 2.0, 3.0]), 0.01, 100, save_every=10,
+        ...                          chunk_steps=30)
+        >>> bool(jnp.all(chunked.q == traj.q))
+        True
     """
+    if progress or chunk_steps is not None:
+        from ._chunked import chunked_rollout  # it imports this module
+
+        return chunked_rollout(
+            scheme,
+            state,
+            inertia,
+            dt,
+            n_steps,
+            torque=torque,
+            args=args,
+            save_every=save_every,
+            t0=t0,
+            drive=drive,
+            normalize=normalize,
+            return_carry=return_carry,
+            runtime_check=runtime_check,
+            progress=progress,
+            chunk_steps=chunk_steps,
+        )
+    run = prepare_run(
+        scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
+    )
+    traj, carry = run.flat(run.n_saves, state=run.flat_state)
+    if runtime_check:
+        carry, report = carry
+        run.check_report(report)
+    if is_concrete(carry):
+        message = run.scheme.report(carry)
+        if message:
+            warnings.warn(message, RuntimeWarning, stacklevel=2)
+    traj = unflatten_trajectory(traj, run.batch_shape)
+    return (traj, carry) if return_carry else traj
+
+
+class Run(NamedTuple):
+    """A validated rollout with its particle axes flattened: the fixed arguments of `_rollout_flat`."""
+
+    scheme: Any
+    flat_state: RotState
+    inertia: Any
+    per_particle: bool
+    dt: jax.Array
+    t0: jax.Array
+    args: Any
+    args_axes: Any
+    torque: Any
+    drive: Any
+    drive_per_particle: bool
+    n_saves: int
+    save_every: int
+    n_steps: int
+    batch_shape: tuple
+    runtime_check: bool
+    n_blocks: int
+
+    def flat(self, n_saves, carry=None, save_offset=None, state=None):
+        """`_rollout_flat` of ``n_saves`` saves from ``state``, or continuing ``carry`` (see there)."""
+        return _rollout_flat(
+            self.scheme,
+            state,
+            self.inertia,
+            self.per_particle,
+            self.dt,
+            self.t0,
+            self.args,
+            self.args_axes,
+            self.torque,
+            self.drive,
+            self.drive_per_particle,
+            n_saves,
+            self.save_every,
+            self.runtime_check,
+            carry,
+            save_offset,
+            self.n_blocks,
+        )
+
+    def check_report(self, report):
+        """Raise (eager) or schedule the raise (traced) of a runtime-check report."""
+        check = raise_if_bad if is_concrete(report, self.t0, self.dt) else check_in_graph
+        check(report, self.batch_shape, self.t0, self.dt, self.scheme.name)
+
+
+def prepare_run(
+    scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
+) -> Run:
+    """Check the arguments of `rollout` (before anything compiles) and flatten the particle axes."""
     scheme = resolve_scheme(scheme)
     state, inertia, per_particle = check_bodies(state, inertia, normalize=normalize)
     dtype = state.q.dtype
-    batch_shape = state.q.shape[:-1]
+    batch_shape = tuple(state.q.shape[:-1])
     dt = check_dt(dt).astype(dtype)
     n_steps = check_count(n_steps, "n_steps", 0)
     save_every = check_count(save_every, "save_every", 1)
@@ -101,14 +207,22 @@ def rollout(
     t0 = jnp.asarray(t0).astype(dtype)
     if t0.ndim != 0:
         raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
-
     drive, drive_per_particle = check_drive(drive, batch_shape, dtype)
 
     flat_state, inertia = flatten_particles(state, inertia, per_particle)
     args, args_axes = split_per_body(args, batch_shape)
     if drive_per_particle:
         drive = jax.tree_util.tree_map(lambda x: x.reshape(-1, 3), drive)
-    traj, carry = _rollout_flat(
+    # Sharded particles: each device keeps its own bodies (`jaxrot._sharding`).
+    flat_state, inertia, args, drive = shard_particles(
+        (flat_state, inertia, args, drive),
+        (0, 0 if per_particle else None, args_axes, 0 if drive_per_particle else None),
+    )
+    n = math.prod(batch_shape)
+    n_blocks = _blocking.n_blocks_for(n, shards=particle_shards())
+    if n_blocks > 1 and _blocking.couples_bodies(torque, n, t0, flat_state, args, args_axes):
+        n_blocks = 1
+    return Run(
         scheme,
         flat_state,
         inertia,
@@ -122,18 +236,11 @@ def rollout(
         drive_per_particle,
         n_steps // save_every,
         save_every,
-        runtime_check,
+        n_steps,
+        batch_shape,
+        bool(runtime_check),
+        n_blocks,
     )
-    if runtime_check:
-        carry, report = carry
-        check = raise_if_bad if is_concrete(report, t0, dt) else check_in_graph
-        check(report, batch_shape, t0, dt, scheme.name)
-    if is_concrete(carry):
-        message = scheme.report(carry)
-        if message:
-            warnings.warn(message, RuntimeWarning, stacklevel=2)
-    traj = unflatten_trajectory(traj, batch_shape)
-    return (traj, carry) if return_carry else traj
 
 
 @eqx.filter_jit
@@ -152,43 +259,104 @@ def _rollout_flat(
     n_saves,
     save_every,
     runtime_check=False,
+    carry=None,
+    save_offset=None,
+    n_blocks=1,
 ):
-    """Rollout of ``(N, ...)`` particles; the compiled core of `rollout`."""
-    inertia_axis = 0 if per_particle else None
-    drive_axis = 0 if drive_per_particle else None
-    prepared = jax.vmap(body_inertia)(inertia) if per_particle else body_inertia(inertia)
+    """Rollout of ``(N, ...)`` particles; the compiled core of `rollout`.
 
-    def init_one(s, inert, drv, a):
-        return scheme.init(s, t0, inert, torque if drv is None else driven_torque(torque, drv), a)
+    With ``carry=None`` it starts from ``state`` with ``scheme.init`` and returns the
+    ``n_saves + 1`` saved states, the initial one first. With a ``carry`` (a scheme
+    carry of ``(N, ...)`` particles, as returned here) it continues it instead:
+    ``state`` is then None, ``save_offset`` (a traced integer, so that every chunk of
+    one size shares one compilation) is the number of saves already done, and only
+    the ``n_saves`` new states are returned, with times and step numbers counted from
+    ``t0`` exactly as in one call (`jaxrot._chunked`).
 
-    def step_one(carry, t, inert, drv, a):
-        if drv is None:
-            return scheme.step(carry, t, dt, inert, torque, a)
-        return driven_step(scheme, carry, t, dt, inert, torque, a, drv)
+    With ``n_blocks > 1`` (bodies that no torque couples, `jaxrot._blocking`) the
+    bodies go through the whole time loop one block at a time, each block's stages in
+    cache: the same arithmetic per body (the same bits but for ``"splitting"``).
+    """
+    resumed = carry is not None
+    # Global save indices: integer arithmetic, so times match one long call bit for bit.
+    save_indices = save_offset + jnp.arange(n_saves) if resumed else jnp.arange(n_saves)
 
-    # Named, so that a coupled torque can gather the other bodies (`jaxrot.torques`).
-    init_all = jax.vmap(init_one, in_axes=(0, inertia_axis, drive_axis, args_axes), axis_name=PARTICLES)
-    step_all = jax.vmap(step_one, in_axes=(0, None, inertia_axis, drive_axis, args_axes), axis_name=PARTICLES)
+    def bodies(state, carry, inertia, drive, args):
+        """The time loop for some ``(M, ...)`` of the bodies: ``(saved states, carry)``."""
+        inertia_axis = 0 if per_particle else None
+        drive_axis = 0 if drive_per_particle else None
+        prepared = jax.vmap(body_inertia)(inertia) if per_particle else body_inertia(inertia)
 
-    def save_interval(carry_report, save_index):
-        def one_step(c_r, j):
-            c, report = c_r
-            # t from the step index, not by accumulation, so late times keep full precision.
-            t = t0 + (save_index * save_every + j).astype(dt.dtype) * dt
-            c = step_all(c, t, prepared, drive, args)
+        def init_one(s, inert, drv, a):
+            return scheme.init(s, t0, inert, torque if drv is None else driven_torque(torque, drv), a)
+
+        def step_one(carry, t, inert, drv, a):
+            if drv is None:
+                return scheme.step(carry, t, dt, inert, torque, a)
+            return driven_step(scheme, carry, t, dt, inert, torque, a, drv)
+
+        # Named, so that a coupled torque can gather the other bodies (`jaxrot.torques`).
+        init_all = jax.vmap(init_one, in_axes=(0, inertia_axis, drive_axis, args_axes), axis_name=PARTICLES)
+        step_all = jax.vmap(
+            step_one, in_axes=(0, None, inertia_axis, drive_axis, args_axes), axis_name=PARTICLES
+        )
+
+        def save_interval(carry_report, save_index):
+            def one_step(c_r, j):
+                c, report = c_r
+                # t from the step index, not by accumulation, so late times keep full precision.
+                t = t0 + (save_index * save_every + j).astype(dt.dtype) * dt
+                c = step_all(c, t, prepared, drive, args)
+                if runtime_check:
+                    report = update_report(report, jax.vmap(scheme.state)(c), save_index * save_every + j + 1)
+                return (c, report), None
+
+            (carry, report), _ = jax.lax.scan(one_step, carry_report, jnp.arange(save_every))
+            return (carry, report), jax.vmap(scheme.state)(carry)
+
+        if resumed:
             if runtime_check:
-                report = update_report(report, jax.vmap(scheme.state)(c), save_index * save_every + j + 1)
-            return (c, report), None
+                # The chunk's first state is step ``save_offset * save_every`` (checked again in case the
+                # carry comes from a run without the check).
+                report = init_report(jax.vmap(scheme.state)(carry))
+                first_step = (save_offset * save_every).astype(jnp.int32)
+                report = report._replace(step=jnp.where(report.step >= 0, first_step, report.step))
+            else:
+                report = None
+        else:
+            carry = init_all(state, prepared, drive, args)
+            report = init_report(state) if runtime_check else None
+        if resumed and n_saves * save_every == 1:
+            # A lone step outside any loop gets fused with its surroundings, which moved float32 results
+            # by an ulp against the same step inside the loop of one call; a trip count that XLA cannot
+            # evaluate (1 for any offset >= 0) keeps the loop.
+            def body(i_carry_report):
+                i, carry_report = i_carry_report
+                return i + 1, save_interval(carry_report, save_offset + i)[0]
 
-        (carry, report), _ = jax.lax.scan(one_step, carry_report, jnp.arange(save_every))
-        return (carry, report), jax.vmap(scheme.state)(carry)
+            trips = 1 + jnp.minimum(save_offset, 0)
+            start = (jnp.zeros_like(save_offset), (carry, report))
+            _, (carry, report) = jax.lax.while_loop(lambda x: x[0] < trips, body, start)
+            saved = jax.tree_util.tree_map(lambda x: x[None], jax.vmap(scheme.state)(carry))
+        else:
+            (carry, report), saved = jax.lax.scan(save_interval, (carry, report), save_indices)
+        if runtime_check:
+            carry = (carry, report)
+        if not resumed:
+            saved = jax.tree_util.tree_map(lambda s, x: jnp.concatenate([s[None], x]), state, saved)
+        return saved, carry
 
-    carry = init_all(state, prepared, drive, args)
-    report = init_report(state) if runtime_check else None
-    (carry, report), saved = jax.lax.scan(save_interval, (carry, report), jnp.arange(n_saves))
-    if runtime_check:
-        carry = (carry, report)
-    q = jnp.concatenate([state.q[None], saved.q], axis=0)
-    omega = jnp.concatenate([state.omega[None], saved.omega], axis=0)
-    t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
-    return Trajectory(t, q, omega), carry
+    inputs = (state, carry, inertia, drive, args)
+    if n_blocks == 1:
+        saved, carry = bodies(*inputs)
+    else:
+        axes = (0, 0, 0 if per_particle else None, 0 if drive_per_particle else None, args_axes)
+        n = jax.tree_util.tree_leaves((state, carry))[0].shape[0]
+        saved, carry = _blocking.map_blocks(bodies, n_blocks, inputs, axes)
+        saved = jax.tree_util.tree_map(lambda y: _blocking.from_blocks(y, n, body_axis=1), saved)
+        carry = jax.tree_util.tree_map(lambda y: _blocking.from_blocks(y, n, body_axis=0), carry)
+    if resumed:
+        t = t0 + (save_indices + 1).astype(dt.dtype) * (save_every * dt)
+    else:
+        t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
+    return Trajectory(t, saved.q, saved.omega), carry

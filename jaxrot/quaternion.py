@@ -25,6 +25,7 @@ Example:
 import jax.numpy as jnp
 
 from ._math import safe_norm, taylor_threshold
+from ._trig import sincos
 
 
 __all__ = [
@@ -121,9 +122,9 @@ def exp(rotvec):
     theta_sq = jnp.sum(rotvec * rotvec, axis=-1, keepdims=True)
     use_taylor = theta_sq < taylor_threshold(rotvec.dtype)
     theta = jnp.sqrt(jnp.where(use_taylor, 1, theta_sq))
-    half = 0.5 * theta
-    real = jnp.where(use_taylor, 1 - theta_sq / 8 + theta_sq**2 / 384, jnp.cos(half))
-    imag_factor = jnp.where(use_taylor, 0.5 - theta_sq / 48 + theta_sq**2 / 3840, jnp.sin(half) / theta)
+    sin_half, cos_half = sincos(0.5 * theta)
+    real = jnp.where(use_taylor, 1 - theta_sq / 8 + theta_sq**2 / 384, cos_half)
+    imag_factor = jnp.where(use_taylor, 0.5 - theta_sq / 48 + theta_sq**2 / 3840, sin_half / theta)
     return jnp.concatenate([real, imag_factor * rotvec], axis=-1)
 
 

@@ -1,5 +1,6 @@
 """Shared problems and measurement helpers for the tests."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -27,6 +28,40 @@ def full_tensor(moments=MOMENTS, r=PRINCIPAL_TO_BODY):
 def to_body_frame(state, r=PRINCIPAL_TO_BODY):
     """The same physical state, with orientation expressed for the body frame of `full_tensor`."""
     return jaxrot.RotState(quat.multiply(state.q, quat.conjugate(r)), state.omega)
+
+
+def assert_same(a, b, ulps=0):
+    """Same tree, shapes and dtypes, and equal bits, or within ``ulps`` units of round-off at magnitude 1."""
+    assert jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b), strict=True):
+        assert x.shape == y.shape and x.dtype == y.dtype
+        if ulps and jnp.issubdtype(x.dtype, jnp.floating):
+            np.testing.assert_allclose(x, y, rtol=0, atol=ulps * float(jnp.finfo(x.dtype).eps))
+        else:
+            np.testing.assert_array_equal(x, y)
+
+
+def driven_problem(dtype, n_bodies):
+    """``(state, inertia, dt, rollout kwargs)``: bodies in a rotating field (time-dependent torque),
+    a per-body field strength, body 0 spun at an imposed rate about z and body 1 with an imposed
+    z moment: every carry path of a scheme."""
+    scene = jaxrot.SCENES["dipole_rotating_field"](dtype)
+    rng = np.random.default_rng(1)
+    q = quat.normalize(jnp.asarray(rng.normal(size=(n_bodies, 4)), dtype))
+    state = jaxrot.RotState(q, jnp.asarray(rng.normal(size=(n_bodies, 3)), dtype))
+    amplitude = jaxrot.per_body(jnp.asarray(np.resize([1.0, 0.5, 2.0], n_bodies), dtype))
+    args = {"rotating_field": {**scene.args["rotating_field"], "amplitude": amplitude}}
+    omega_mask, omega, moment_mask, moment = (np.zeros((n_bodies, 3), t) for t in (bool, float, bool, float))
+    omega_mask[0, 2], omega[0, 2] = True, 1.5
+    moment_mask[1, 2], moment[1, 2] = True, 0.3
+    drive = jaxrot.Drive(
+        omega_mask=jnp.asarray(omega_mask),
+        omega=jnp.asarray(omega, dtype),
+        moment_mask=jnp.asarray(moment_mask),
+        moment=jnp.asarray(moment, dtype),
+    )
+    kwargs = {"torque": scene.torque, "args": args, "drive": drive, "t0": 0.3}
+    return state, MOMENTS.astype(dtype), 0.01, kwargs
 
 
 def gravity_args(offset_principal=(0.1, 0.05, 0.3), r=None):

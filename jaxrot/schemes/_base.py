@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._fusion import stage
 from .._inertia import BodyInertia
 from .._state import RotState
 
@@ -85,4 +86,4 @@ def body_torque(torque: Torque | None, t, q, omega, args):
     """Torque in the body frame of ``q``; None when the scene is torque-free."""
     if torque is None:
         return None
-    return quat.rotate(quat.conjugate(q), world_torque(torque, t, q, omega, args))
+    return stage(quat.rotate(quat.conjugate(q), world_torque(torque, t, q, omega, args)))

@@ -6,8 +6,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._fusion import stage
 from .._inertia import BodyInertia, body_inertia
 from .._state import RotState
+from .._trig import sincos
 from ..analytic import principal_axes
 from ._base import AbstractScheme, world_torque
 
@@ -53,11 +55,16 @@ def _inverse_moments(moments):
 def _free_rotor(k, delta, q, p, inv_moments):
     """Exact rotation about principal axis k for time ``delta``: ``ζ = δ (p·P_k q) / (4 I_k)``."""
     pk_q = _permute(k, q)
-    zeta = delta * jnp.dot(p, pk_q) * inv_moments[k - 1] / 4
+    # An explicit sum, not jnp.dot: XLA:CPU fuses a reduction with its whole producer chain.
+    zeta = (
+        delta * (p[0] * pk_q[0] + p[1] * pk_q[1] + p[2] * pk_q[2] + p[3] * pk_q[3]) * inv_moments[k - 1] / 4
+    )
     # x ← cos ζ x + sin ζ P_k x, written as x + (small increment) with cos ζ − 1 = −2 sin²(ζ/2):
     # the O(1) part is not re-rounded each substep (float32 drift on the heavy top measured 14× lower).
-    sin, cos_minus_one = jnp.sin(zeta), -2 * jnp.sin(0.5 * zeta) ** 2
-    return q + (cos_minus_one * q + sin * pk_q), p + (cos_minus_one * p + sin * _permute(k, p))
+    # One sine–cosine pair of ζ/2 gives both (sin ζ = 2 sin(ζ/2) cos(ζ/2)).
+    sin_half, cos_half = stage(*sincos(0.5 * zeta))
+    sin, cos_minus_one = 2 * sin_half * cos_half, -2 * sin_half * sin_half
+    return stage(q + (cos_minus_one * q + sin * pk_q), p + (cos_minus_one * p + sin * _permute(k, p)))
 
 
 def _principal_frame(inertia: BodyInertia):
@@ -144,15 +151,19 @@ class NoSquish(AbstractScheme):
         moments, r = carry.moments, carry.principal_to_body
         inv_moments = _inverse_moments(moments)
         half = 0.5 * dt
-        q, p = carry.q_principal, self._kick(carry.q_principal, carry.momentum, carry.torque, moments, half)
+        # Stage boundaries (`jaxrot._fusion`): see `_free_rotor`.
+        q, p = (
+            carry.q_principal,
+            stage(self._kick(carry.q_principal, carry.momentum, carry.torque, moments, half)),
+        )
         for k, delta in ((3, half), (2, half), (1, dt), (2, half), (3, half)):
             q, p = _free_rotor(k, delta, q, p, inv_moments)
-        q = quat.normalize(q)  # against round-off only, as HOOMD-blue does
+        q = stage(quat.normalize(q))  # against round-off only, as HOOMD-blue does
         if torque is None:
             torque_world = carry.torque
         else:
             end = self._state(q, p, moments, r)
-            torque_world = world_torque(torque, t + dt, end.q, end.omega, args)
+            torque_world = stage(world_torque(torque, t + dt, end.q, end.omega, args))
         p = self._kick(q, p, torque_world, moments, half)
         return NoSquishCarry(q, p, torque_world, moments, r, self._state(q, p, moments, r))
 

