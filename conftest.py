@@ -3,8 +3,8 @@
 import os
 
 
-# Four fake CPU devices for sharding tests; must be set before the backend starts.
-os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
+# Two fake CPU devices (tests/test_sharding.py needs 4: run it with XLA_FLAGS=--xla_force_host_platform_device_count=4); must be set before the backend starts.
+os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
 
 import jax  # noqa: E402
 from hypothesis import settings  # noqa: E402
