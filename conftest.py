@@ -3,7 +3,8 @@
 import os
 
 
-# Two fake CPU devices (tests/test_sharding.py needs 4: run it with XLA_FLAGS=--xla_force_host_platform_device_count=4); must be set before the backend starts.
+# Two fake CPU devices; must be set before the backend starts. tests/test_sharding.py needs 4:
+# XLA_FLAGS=--xla_force_host_platform_device_count=4 python -m pytest tests/test_sharding.py
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
 
 import jax  # noqa: E402

@@ -14,7 +14,6 @@ chunk.
 import math
 import os
 import tempfile
-import warnings
 from collections.abc import Iterator
 from typing import Any, NamedTuple
 
@@ -143,27 +142,21 @@ def _generate(run: Run, chunk_steps: int, start, *, warn: bool) -> Iterator[tupl
         # carry and saved state, and the chunks continue from there.
         n = run.n_saves if run.n_saves <= chunk_saves else 0
         first, carry = run.flat(n, state=run.flat_state)
-        if run.runtime_check:
-            carry, report = carry
-            run.check_report(report)
+        carry = run.checked(carry)
         saves_done = n
     while saves_done < run.n_saves or first is not None:
         n = min(chunk_saves, run.n_saves - saves_done)
         if n > 0:
             traj, carry = run.flat(n, carry=carry, save_offset=jnp.asarray(saves_done, offset_dtype))
-            if run.runtime_check:
-                carry, report = carry
-                run.check_report(report)
+            carry = run.checked(carry)
             if first is not None:
                 traj = Trajectory(*(jnp.concatenate([a, b]) for a, b in zip(first, traj, strict=True)))
         else:
             traj = first
         first = None
         saves_done += n
-        if warn and saves_done == run.n_saves and is_concrete(carry):
-            message = run.scheme.report(carry)
-            if message:
-                warnings.warn(message, RuntimeWarning, stacklevel=2)
+        if warn and saves_done == run.n_saves:
+            run.warn_if_reported(carry, stacklevel=2)
         checkpoint = Checkpoint(carry, saves_done * run.save_every, **metadata)
         yield unflatten_trajectory(traj, run.batch_shape), checkpoint
 
@@ -286,10 +279,7 @@ def chunked_rollout(
             carry = checkpoint.carry
             bar.update(checkpoint.step - bar.n)
     traj = Trajectory(*(jnp.concatenate(parts) for parts in zip(*chunks, strict=True)))
-    if is_concrete(carry):
-        message = run.scheme.report(carry)
-        if message:
-            warnings.warn(message, RuntimeWarning, stacklevel=3)
+    run.warn_if_reported(carry, stacklevel=4)  # through `rollout` and `particle_sharded`'s wrapper
     return (traj, carry) if return_carry else traj
 
 

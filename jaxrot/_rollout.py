@@ -132,13 +132,8 @@ def rollout(
         scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
     )
     traj, carry = run.flat(run.n_saves, state=run.flat_state)
-    if runtime_check:
-        carry, report = carry
-        run.check_report(report)
-    if is_concrete(carry):
-        message = run.scheme.report(carry)
-        if message:
-            warnings.warn(message, RuntimeWarning, stacklevel=2)
+    carry = run.checked(carry)
+    run.warn_if_reported(carry, stacklevel=3)  # past `particle_sharded`'s wrapper to the caller
     traj = unflatten_trajectory(traj, run.batch_shape)
     return (traj, carry) if return_carry else traj
 
@@ -186,10 +181,23 @@ class Run(NamedTuple):
             self.n_blocks,
         )
 
-    def check_report(self, report):
-        """Raise (eager) or schedule the raise (traced) of a runtime-check report."""
+    def checked(self, carry):
+        """The scheme's carry from `flat`'s: with ``runtime_check``, split off its report and raise
+        (eager) or schedule the raise (traced) of any bad step in it."""
+        if not self.runtime_check:
+            return carry
+        carry, report = carry
         check = raise_if_bad if is_concrete(report, self.t0, self.dt) else check_in_graph
         check(report, self.batch_shape, self.t0, self.dt, self.scheme.name)
+        return carry
+
+    def warn_if_reported(self, carry, stacklevel):
+        """Warn of the problem the scheme reports in its final (concrete) carry, if any, at the frame
+        ``stacklevel`` levels above the caller, as `warnings.warn` counts from the caller."""
+        if is_concrete(carry):
+            message = self.scheme.report(carry)
+            if message:
+                warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
 
 
 def prepare_run(

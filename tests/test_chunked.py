@@ -180,3 +180,15 @@ def test_runtime_check_names_the_same_global_step():
     with pytest.raises(jaxrot.IntegrationError) as chunked:
         next(chunks)
     assert str(chunked.value) == str(one.value)
+
+
+def test_scheme_warnings_point_at_the_callers_line():
+    # rozmanov with one iteration reports unconverged half steps; the warning must name this file,
+    # not jaxrot's wrappers (`particle_sharded`, `rollout` delegating to the chunks).
+    scheme = jaxrot.schemes.Rozmanov(max_iter=1)
+    state = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([30.0, 100.0, 20.0]))
+    with pytest.warns(RuntimeWarning) as record:
+        jaxrot.rollout(scheme, state, MOMENTS, 0.1, 5)
+        jaxrot.rollout(scheme, state, MOMENTS, 0.1, 5, chunk_steps=2)
+        list(jaxrot.rollout_chunks(scheme, state, MOMENTS, 0.1, 5, chunk_steps=2))
+    assert [w.filename for w in record] == [__file__] * 3
