@@ -156,7 +156,7 @@ def _generate(run: Run, chunk_steps: int, start, *, warn: bool) -> Iterator[tupl
         first = None
         saves_done += n
         if warn and saves_done == run.n_saves:
-            run.warn_if_reported(carry, stacklevel=2)
+            run.warn_if_reported(run.scheme.summarize(carry), stacklevel=2)
         checkpoint = Checkpoint(carry, saves_done * run.save_every, **metadata)
         yield unflatten_trajectory(traj, run.batch_shape), checkpoint
 
@@ -279,7 +279,8 @@ def chunked_rollout(
             carry = checkpoint.carry
             bar.update(checkpoint.step - bar.n)
     traj = Trajectory(*(jnp.concatenate(parts) for parts in zip(*chunks, strict=True)))
-    run.warn_if_reported(carry, stacklevel=4)  # through `rollout` and `particle_sharded`'s wrapper
+    # stacklevel: through `rollout` and `particle_sharded`'s wrapper to the caller.
+    run.warn_if_reported(run.scheme.summarize(carry), stacklevel=4)
     return (traj, carry) if return_carry else traj
 
 

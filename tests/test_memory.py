@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import pytest
 
 import jaxrot
-from jaxrot import _blocking
+from jaxrot import _blocking, _rollout
 
 
 def compiled_memory(scheme, n_bodies, n_steps, save_every):
@@ -38,6 +38,31 @@ def test_memory_is_independent_of_the_number_of_steps(scheme, blocked, monkeypat
     assert sizes[1000] == sizes[100_000]  # 11 saved states
     # The output holds the saved states: t, and q and omega of 64 bodies, float64.
     assert sizes[1000][1] - sizes[100][1] == 9 * (1 + 64 * 7) * 8
+
+
+@pytest.mark.parametrize("scheme", ["no_squish", "rozmanov"])
+@pytest.mark.parametrize("runtime_check", [False, True])
+def test_the_compiled_core_keeps_the_final_carry_only_when_asked(scheme, runtime_check):
+    """`rollout` without ``return_carry`` gets the saved states and the scheme's summary of the
+    final carry (rozmanov: its count of unconverged steps), not the carry itself."""
+    n = 64
+    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
+    state = jaxrot.RotState(q, jnp.ones((n, 3)))
+    run = _rollout.prepare_run(
+        scheme, state, jnp.array([1.0, 2.0, 3.0]), 1e-3, 20, None, None, 10, 0.0, None, True, runtime_check
+    )
+
+    def output_bytes(keep_carry):
+        """Bytes of the outputs, less XLA's table of 8-byte pointers to them."""
+        flat = jax.jit(lambda s: run.flat(run.n_saves, state=s, keep_carry=keep_carry))
+        table = 8 * len(jax.tree_util.tree_leaves(jax.eval_shape(flat, run.flat_state)))
+        return flat.lower(run.flat_state).compile().memory_analysis().output_size_in_bytes - table
+
+    saved = 3 * (1 + n * 7) * 8  # t, q and omega of 3 saved states, float64
+    summary = 8 if scheme == "rozmanov" else 0
+    report = output_bytes(False) - saved - summary
+    assert report == (n * (4 + 4 + 8) if runtime_check else 0)  # StepReport: step, kind, norm error
+    assert output_bytes(True) - report - saved > n * 7 * 8  # the carry: at least a state per body
 
 
 def memory_maps():

@@ -35,6 +35,9 @@ def test_says_so_when_it_does_not_converge():
         traj, carry = jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING, MOMENTS, 0.05, 20, return_carry=True)
     assert int(carry.unconverged_steps[0]) == 20
     assert int(carry.max_iterations[0]) == 1
+    # Without the carry the compiled core returns only its count (`Rozmanov.summarize`).
+    with pytest.warns(RuntimeWarning, match="on 20 particle-step"):
+        jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING, MOMENTS, 0.05, 20)
 
 
 def test_more_iterations_than_needed_change_nothing():

@@ -67,8 +67,14 @@ class AbstractScheme(eqx.Module):
         """Orientation after ``dt`` at imposed world angular velocity ``omega``: exactly ``exp(ω Δt) ⊗ q``."""
         return quat.multiply(quat.exp(dt * omega), q)
 
-    def report(self, carry) -> str | None:
-        """A warning about a finished rollout's carry (concrete values), or None."""
+    def summarize(self, carry):
+        """What `report` needs of a final carry, reduced over the particles (traceable), or None.
+
+        Small, so that a rollout that does not return its carry need not keep it."""
+        return None
+
+    def report(self, summary) -> str | None:
+        """A warning about a finished rollout, from its concrete `summarize` output, or None."""
         return None
 
 

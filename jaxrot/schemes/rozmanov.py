@@ -174,8 +174,11 @@ class Rozmanov(AbstractScheme):
         angular_momentum = _world_angular_momentum(state.q, state.omega, body_inertia(inertia))
         return carry._replace(state=state, angular_momentum=angular_momentum)
 
-    def report(self, carry):
-        unconverged = int(np.sum(np.asarray(carry.unconverged_steps)))
+    def summarize(self, carry):
+        return jnp.sum(carry.unconverged_steps)
+
+    def report(self, summary):
+        unconverged = int(summary)
         if unconverged == 0:
             return None
         return (
