@@ -1,5 +1,7 @@
 """Rozmanov–Kusalik velocity Verlet: the capped, differentiable half-step iteration."""
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import pytest
@@ -35,9 +37,20 @@ def test_says_so_when_it_does_not_converge():
         traj, carry = jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING, MOMENTS, 0.05, 20, return_carry=True)
     assert int(carry.unconverged_steps[0]) == 20
     assert int(carry.max_iterations[0]) == 1
-    # Without the carry the compiled core returns only its count (`Rozmanov.summarize`).
+    # Without the carry the compiled core returns only its count (`Rozmanov.summarize`): an integer,
+    # with no tangent, so it is concrete under jax.grad too.
     with pytest.warns(RuntimeWarning, match="on 20 particle-step"):
         jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING, MOMENTS, 0.05, 20)
+
+    def last_q(omega):
+        traj = jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING._replace(omega=omega), MOMENTS, 0.05, 20)
+        return jnp.sum(traj.q[-1])
+
+    with pytest.warns(RuntimeWarning, match="on 20 particle-step"):
+        jax.grad(last_q)(TUMBLING.omega)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jax.jit(last_q)(TUMBLING.omega)  # traced count: no warning (README)
 
 
 def test_more_iterations_than_needed_change_nothing():

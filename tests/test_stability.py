@@ -9,6 +9,7 @@ Shapes are shared between tests where possible so that compiled code is reused.
 
 import functools
 import warnings
+from contextlib import nullcontext
 
 import jax
 import jax.numpy as jnp
@@ -182,7 +183,9 @@ def test_gradients_through_1e4_steps_at_extreme_bodies_and_rest(name):
         )
         return jnp.sum(out.q[-1] * weights[None]) + jnp.sum(out.omega[-1])
 
-    per_row = jax.grad(loss, argnums=(0, 1))(state.omega, moments)
+    # rozmanov's iteration stops converging on the needles, and says so also under jax.grad.
+    with pytest.warns(RuntimeWarning, match="did not reach tol") if name == "rozmanov" else nullcontext():
+        per_row = jax.grad(loss, argnums=(0, 1))(state.omega, moments)
     finite = np.all(np.isfinite(np.asarray(per_row[0])), -1) & np.all(np.isfinite(np.asarray(per_row[1])), -1)
     assert finite.all()
     # A small spin moves a body at rest.
