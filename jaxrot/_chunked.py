@@ -128,6 +128,11 @@ def _resume_carry(run: Run, checkpoint) -> tuple[Any, int]:
     return treedef.unflatten([jnp.asarray(x) for x in leaves]), int(step)
 
 
+def _concatenated(trajectories) -> Trajectory:
+    """Flat trajectory chunks joined along the saved-state axis."""
+    return Trajectory(*(jnp.concatenate(parts) for parts in zip(*trajectories, strict=True)))
+
+
 def _generate(run: Run, chunk_steps: int, start, *, warn: bool) -> Iterator[tuple[Trajectory, Checkpoint]]:
     """The chunks from the beginning (``start=None``) or from ``start = (carry, step)``."""
     chunk_saves = chunk_steps // run.save_every
@@ -150,7 +155,7 @@ def _generate(run: Run, chunk_steps: int, start, *, warn: bool) -> Iterator[tupl
             traj, carry = run.flat(n, carry=carry, save_offset=jnp.asarray(saves_done, offset_dtype))
             carry = run.checked(carry)
             if first is not None:
-                traj = Trajectory(*(jnp.concatenate([a, b]) for a, b in zip(first, traj, strict=True)))
+                traj = _concatenated([first, traj])
         else:
             traj = first
         first = None
@@ -239,30 +244,10 @@ def default_chunk_steps(n_steps: int, save_every: int) -> int:
     return max(1, math.ceil((n_steps // save_every) / 100)) * save_every
 
 
-def chunked_rollout(
-    scheme,
-    state,
-    inertia,
-    dt,
-    n_steps,
-    *,
-    torque,
-    args,
-    save_every,
-    t0,
-    drive,
-    normalize,
-    return_carry,
-    runtime_check,
-    progress,
-    chunk_steps,
-):
-    """`jaxrot.rollout` with ``progress`` or ``chunk_steps``: the chunks, concatenated."""
+def chunked_rollout(run: Run, chunk_steps: int | None, *, progress: bool, return_carry: bool):
+    """`jaxrot.rollout` with ``progress`` or ``chunk_steps``: the chunks of ``run``, concatenated."""
     from tqdm import tqdm
 
-    run = prepare_run(
-        scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
-    )
     if chunk_steps is None:
         chunk_steps = default_chunk_steps(run.n_steps, run.save_every)
     chunk_steps = _check_chunk_steps(chunk_steps, run.save_every)
@@ -278,7 +263,7 @@ def chunked_rollout(
             chunks.append(traj)
             carry = checkpoint.carry
             bar.update(checkpoint.step - bar.n)
-    traj = Trajectory(*(jnp.concatenate(parts) for parts in zip(*chunks, strict=True)))
+    traj = _concatenated(chunks)
     # stacklevel: through `rollout` and `particle_sharded`'s wrapper to the caller.
     run.warn_if_reported(run.scheme.summarize(carry), stacklevel=4)
     return (traj, carry) if return_carry else traj

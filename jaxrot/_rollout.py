@@ -108,29 +108,13 @@ def rollout(
         >>> bool(jnp.all(chunked.q == traj.q))
         True
     """
-    if progress or chunk_steps is not None:
-        from ._chunked import chunked_rollout  # it imports this module
-
-        return chunked_rollout(
-            scheme,
-            state,
-            inertia,
-            dt,
-            n_steps,
-            torque=torque,
-            args=args,
-            save_every=save_every,
-            t0=t0,
-            drive=drive,
-            normalize=normalize,
-            return_carry=return_carry,
-            runtime_check=runtime_check,
-            progress=progress,
-            chunk_steps=chunk_steps,
-        )
     run = prepare_run(
         scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
     )
+    if progress or chunk_steps is not None:
+        from ._chunked import chunked_rollout  # it imports this module
+
+        return chunked_rollout(run, chunk_steps, progress=progress, return_carry=return_carry)
     # Without return_carry the compiled core returns only the scheme's summary of the final carry:
     # peak memory for 10^6 bodies, 10^3 steps fell from 992 to 719 MiB (NO_SQUISH), 823 to 728 (Zhao).
     traj, carry = run.flat(run.n_saves, state=run.flat_state, keep_carry=return_carry)
