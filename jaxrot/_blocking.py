@@ -98,12 +98,13 @@ def couples_bodies(torque, n: int, t, flat_state, args, args_axes) -> bool:
 
     leaves, treedef = jax.tree_util.tree_flatten(args)
     per_body = leaf_axes(args_axes, args)
-    dynamic = [abstract(x, a == 0) for x, a in zip(leaves, per_body, strict=True) if eqx.is_array(x)]
+    one_args = treedef.unflatten(
+        [abstract(x, a == 0) if eqx.is_array(x) else x for x, a in zip(leaves, per_body, strict=True)]
+    )
+    dynamic, static = eqx.partition(one_args, lambda x: isinstance(x, jax.ShapeDtypeStruct))
 
     def one_body(t, q, omega, dynamic):
-        it = iter(dynamic)
-        a = treedef.unflatten([next(it) if eqx.is_array(x) else x for x in leaves])
-        return torque(t, q, omega, a)
+        return torque(t, q, omega, eqx.combine(dynamic, static))
 
     q, omega = (abstract(x, True) for x in flat_state)
     jaxpr = jax.make_jaxpr(one_body, axis_env=[(PARTICLES, n)])(abstract(t, False), q, omega, dynamic)
@@ -124,15 +125,10 @@ def leaf_axes(axes, tree) -> list:
 def map_blocks(fn, n_blocks: int, inputs: tuple, in_axes: tuple):
     """``fn(*inputs)`` block by block (``lax.map``): leaves with axis 0 in ``in_axes`` are split
     by `to_blocks`, the others are shared. Outputs come stacked, the block axis in front."""
-    leaves, treedef = jax.tree_util.tree_flatten(inputs)
-    axes = leaf_axes(in_axes, inputs)
-    blocked = [to_blocks(x, n_blocks) for x, a in zip(leaves, axes, strict=True) if a == 0]
-
-    def one_block(rows):
-        it = iter(rows)
-        return fn(*treedef.unflatten([next(it) if a == 0 else x for x, a in zip(leaves, axes, strict=True)]))
-
-    return jax.lax.map(one_block, blocked)
+    per_body = jax.tree_util.tree_structure(inputs).unflatten([a == 0 for a in leaf_axes(in_axes, inputs)])
+    rows, shared = eqx.partition(inputs, per_body)
+    blocked = jax.tree_util.tree_map(lambda x: to_blocks(x, n_blocks), rows)
+    return jax.lax.map(lambda block: fn(*eqx.combine(block, shared)), blocked)
 
 
 def _mentions_axis(jaxpr) -> bool:

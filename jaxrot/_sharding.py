@@ -42,6 +42,7 @@ import inspect
 import math
 from typing import Any, NamedTuple
 
+import equinox as eqx
 import jax
 from jax.sharding import AxisType, Mesh, NamedSharding, PartitionSpec
 
@@ -228,15 +229,10 @@ def _eager_on_auto_axes(fn, mesh: Mesh, batch_spec, n, args, kwargs):
 
 def _traced_on_auto_axes(fn, mesh, batch_spec, n, args, kwargs):
     """Tracers typed with explicit axes: run ``fn`` under `jax.sharding.auto_axes`."""
-    leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
-    is_array = [isinstance(x, jax.Array) for x in leaves]
-    arrays = [x for x, a in zip(leaves, is_array, strict=True) if a]
+    arrays, static = eqx.partition((args, kwargs), lambda x: isinstance(x, jax.Array))
 
     def inner(arrays):
-        it = iter(arrays)
-        a, k = jax.tree_util.tree_unflatten(
-            treedef, [next(it) if b else x for x, b in zip(leaves, is_array, strict=True)]
-        )
+        a, k = eqx.combine(arrays, static)
         layout = ParticleLayout(jax.sharding.get_abstract_mesh(), batch_spec)
         with _current(layout):
             out = fn(*a, **k)
