@@ -33,19 +33,15 @@ state, scene = bodies(n, jnp.float64)
 jax.block_until_ready(state)
 
 
-def run(s):
+def run(s, chunk_steps=None):
     return jaxrot.rollout(scheme, s, scene.inertia, 1e-3, steps, torque=scene.torque, args=scene.args,
-                          save_every=save_every)
+                          save_every=save_every, chunk_steps=chunk_steps)
 
 
 stats = jax.jit(run).lower(state).compile().memory_analysis()
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 start = time.perf_counter()
-if chunk:
-    traj = jaxrot.rollout(scheme, state, scene.inertia, 1e-3, steps, torque=scene.torque, args=scene.args,
-                          save_every=save_every, chunk_steps=chunk)
-else:
-    traj = run(state)
+traj = run(state, chunk or None)
 jax.block_until_ready(traj)
 seconds = time.perf_counter() - start
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
