@@ -4,14 +4,32 @@ from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
 from .euler import Euler as Euler
+from ._lie_runge_kutta import AbstractLieRungeKutta as AbstractLieRungeKutta
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
+from .rkmk4 import RKMK4 as RKMK4
+from .rkmk_dopri5 import RKMKDopri5 as RKMKDopri5
+from .rkmk_dopri8 import RKMKDopri8 as RKMKDopri8
+from .rkmk_tsit5 import RKMKTsit5 as RKMKTsit5
 from .rozmanov import Rozmanov as Rozmanov, RozmanovCarry as RozmanovCarry
 from .splitting import Splitting as Splitting, SplittingCarry as SplittingCarry
 from .zhao import Zhao as Zhao
 
 
 SCHEMES = MappingProxyType(
-    {scheme.name: scheme for scheme in (Zhao(), Rozmanov(), Euler(), NoSquish(), Splitting())}
+    {
+        scheme.name: scheme
+        for scheme in (
+            Zhao(),
+            Rozmanov(),
+            Euler(),
+            NoSquish(),
+            Splitting(),
+            RKMK4(),
+            RKMKTsit5(),
+            RKMKDopri5(),
+            RKMKDopri8(),
+        )
+    }
 )
 
 

@@ -1,11 +1,14 @@
-"""The small interface every scheme implements.
+"""The contract every scheme implements.
 
 A scheme advances **one body**; `jaxrot.rollout` vmaps it over particles and
 scans it over time. A scheme may carry more than `RotState` between steps (a
-momentum, a reused torque): `init` builds that carry, `step` advances it and
-`state` reads the `RotState` back out.
+momentum, a reused torque, a frame): `init` builds that carry, `step` advances
+it and `state` reads the `RotState` back out. The carry plays the role of
+diffrax's ``(y, solver_state)`` pair: the `RotState` is the ``y`` a user sees,
+the rest is the scheme's own.
 """
 
+import abc
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -25,27 +28,47 @@ Torque = Callable[[jax.Array, jax.Array, jax.Array, Any], jax.Array]
 class AbstractScheme(eqx.Module):
     """Base class of the integrators in `jaxrot.SCHEMES`.
 
-    Class attributes:
+    Every method acts on **one body**; `jaxrot.rollout` vmaps over particles and
+    scans over time. The arguments shared by the methods, documented here once:
+
+    - ``state``: `RotState` ``(q (4,), omega (3,))``; ``q`` a unit quaternion,
+      scalar first, mapping body-frame vectors to the world frame; ``omega`` the
+      angular velocity in the **world** frame [rad / time].
+    - ``carry``: what `init` returns and `step` advances: the `RotState` itself
+      for a scheme that needs nothing more (the default), else a scheme-specific
+      NamedTuple holding it (read it back with `state`).
+    - ``t``: scalar time at the start of the step; ``dt``: scalar step > 0.
+    - ``inertia``: body-frame inertia about the centre of mass, principal
+      moments ``(3,)`` (fast path) or a symmetric tensor ``(3, 3)``, or a
+      `jaxrot.BodyInertia` [mass · length²].
+    - ``torque``: ``torque(t, q, omega, args) -> (3,)`` in the world frame for
+      one body, or None for a torque-free body (then never called).
+    - ``args``: any pytree, passed to ``torque`` unchanged.
+
+    Class attributes (required of every concrete scheme, checked by equinox):
         name: the key in `jaxrot.SCHEMES`.
-        order: nominal global order of accuracy in ``dt``.
+        order: global order of accuracy in ``dt``, as measured by the test suite.
         torque_evals_per_step: calls of the torque callable per step (0 when
-            ``torque=None``, which is never called).
+            ``torque=None``).
         torque_evals_at_init: extra calls made once by `init` (schemes that
-            reuse the end-of-step torque evaluate the first one there).
+            reuse the end-of-step torque evaluate the first one there); 0 unless set.
+
+    Required method: `step`. A scheme whose carry is not the plain `RotState`
+    overrides `init`, `state` and `with_state` together.
     """
 
-    name: ClassVar[str]
-    order: ClassVar[int]
-    torque_evals_per_step: ClassVar[int]
+    name: eqx.AbstractClassVar[str]
+    order: eqx.AbstractClassVar[int]
+    torque_evals_per_step: eqx.AbstractClassVar[int]
     torque_evals_at_init: ClassVar[int] = 0
 
     def init(self, state: RotState, t0, inertia: BodyInertia, torque: Torque | None, args) -> Any:
-        """Carry for the first step; the plain state unless the scheme needs more."""
+        """Carry for the first step at time ``t0``; the plain ``state`` unless the scheme needs more."""
         return state
 
+    @abc.abstractmethod
     def step(self, carry, t, dt, inertia: BodyInertia, torque: Torque | None, args) -> Any:
-        """Advance one body from time ``t`` to ``t + dt``."""
-        raise NotImplementedError
+        """Advance one body's ``carry`` from time ``t`` to ``t + dt``; returns the new carry."""
 
     def state(self, carry) -> RotState:
         """The `RotState` held in a carry."""

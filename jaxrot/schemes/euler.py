@@ -28,8 +28,6 @@ class Euler(AbstractScheme):
     velocity-driven body (`jaxrot.Drive`) moves by the same first-order formula
     with the imposed ``ω``, as in Rockable's ``velocityControlledDrive``.
 
-    Frames and shapes as in `jaxrot.schemes.Zhao`.
-
     Reference:
         V. Richefeu et al., Rockable (github.com/richefeu/rockable),
         ``src/Core/Rockable.cpp`` ``EulerStep`` and the integration-scheme docs.

@@ -61,10 +61,6 @@ class Splitting(AbstractScheme):
     are finite and true everywhere, also at and near ``ω = 0`` (a body started at rest
     under a torque) and near steady rotation; the limits are listed in `jaxrot.analytic`.
 
-    Frames and shapes (one body; `jaxrot.rollout` vmaps): ``q`` ``(4,)`` scalar
-    first, body → world; ``omega`` ``(3,)`` world; ``inertia`` body frame, ``(3,)``
-    principal moments or ``(3, 3)`` tensor; torque world frame ``(3,)``.
-
     Reference:
         E. Celledoni, F. Fassò, N. Säfström and A. Zanna, "The exact computation
         of the free rigid body motion and its use in splitting methods", SIAM J.

@@ -31,10 +31,6 @@ class Zhao(AbstractScheme):
     This follows the paper, not the QuaternionIntegrator.jl text, whose swapped
     ¼/½ factors and ``q0``-rotated midpoint torque make the scheme first order.
 
-    Frames and shapes (one body; `jaxrot.rollout` vmaps): ``q`` ``(4,)`` scalar
-    first, body → world; ``omega`` ``(3,)`` world; ``inertia`` body frame, ``(3,)``
-    principal moments or ``(3, 3)`` tensor; torque world frame ``(3,)``.
-
     Reference:
         F. Zhao and B. G. M. van Wachem, "A novel Quaternion integration approach
         for describing the behaviour of non-spherical particles", Acta Mechanica

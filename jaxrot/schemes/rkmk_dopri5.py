@@ -1,0 +1,30 @@
+"""RKMK-Dopri5: diffrax's `Dopri5` tableau on SO(3) × R³, order 5 with an embedded error estimate."""
+
+from typing import ClassVar
+
+import diffrax
+
+from ._lie_runge_kutta import AbstractLieRungeKutta
+
+
+class RKMKDopri5(AbstractLieRungeKutta):
+    """Runge–Kutta–Munthe-Kaas with diffrax's `Dopri5` tableau: order 5, embedded error estimate.
+
+    The tableau is read from `diffrax.Dopri5.tableau`, not retyped. For a fixed step the
+    stages after the last nonzero solution weight are skipped, so a step calls the
+    torque ``torque_evals_per_step`` times; `step_with_error` evaluates them all.
+
+    Reference: J. R. Dormand and P. J. Prince, J. Comput. Appl. Math. 6, 19–26 (1980); H. Munthe-Kaas, BIT 38, 92–111 (1998).
+
+    Example:
+        >>> import jax.numpy as jnp, jaxrot
+        >>> s = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 1.0, 0.2]))
+        >>> traj = jaxrot.rollout("rkmk_dopri5", s, jnp.array([1.0, 2.0, 3.0]), 0.05, 100)
+        >>> print(traj.q.shape, jaxrot.SCHEMES["rkmk_dopri5"].torque_evals_per_step)
+        (101, 4) 6
+    """
+
+    name: ClassVar[str] = "rkmk_dopri5"
+    order: ClassVar[int] = 5
+    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri5.tableau
+    has_error_estimate: ClassVar[bool] = True
