@@ -3,8 +3,9 @@
 from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
-from .euler import Euler as Euler
 from ._lie_runge_kutta import AbstractLieRungeKutta as AbstractLieRungeKutta
+from ._rkn_splitting import AbstractRKNSplitting as AbstractRKNSplitting
+from .euler import Euler as Euler
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
 from .rkmk4 import RKMK4 as RKMK4
 from .rkmk_dopri5 import RKMKDopri5 as RKMKDopri5
@@ -12,6 +13,8 @@ from .rkmk_dopri8 import RKMKDopri8 as RKMKDopri8
 from .rkmk_tsit5 import RKMKTsit5 as RKMKTsit5
 from .rozmanov import Rozmanov as Rozmanov, RozmanovCarry as RozmanovCarry
 from .splitting import Splitting as Splitting, SplittingCarry as SplittingCarry
+from .srkn6b import SRKN6b as SRKN6b
+from .srkn14a import SRKN14a as SRKN14a
 from .zhao import Zhao as Zhao
 
 
@@ -28,6 +31,8 @@ SCHEMES = MappingProxyType(
             RKMKTsit5(),
             RKMKDopri5(),
             RKMKDopri8(),
+            SRKN6b(),
+            SRKN14a(),
         )
     }
 )

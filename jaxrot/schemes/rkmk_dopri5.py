@@ -14,7 +14,8 @@ class RKMKDopri5(AbstractLieRungeKutta):
     stages after the last nonzero solution weight are skipped, so a step calls the
     torque ``torque_evals_per_step`` times; `step_with_error` evaluates them all.
 
-    Reference: J. R. Dormand and P. J. Prince, J. Comput. Appl. Math. 6, 19–26 (1980); H. Munthe-Kaas, BIT 38, 92–111 (1998).
+    Reference: J. R. Dormand and P. J. Prince, J. Comput. Appl. Math. 6, 19–26 (1980);
+    H. Munthe-Kaas, BIT 38, 92–111 (1998).
 
     Example:
         >>> import jax.numpy as jnp, jaxrot

@@ -14,7 +14,8 @@ class RKMKDopri8(AbstractLieRungeKutta):
     stages after the last nonzero solution weight are skipped, so a step calls the
     torque ``torque_evals_per_step`` times; `step_with_error` evaluates them all.
 
-    Reference: P. J. Prince and J. R. Dormand, J. Comput. Appl. Math. 7, 67–75 (1981); H. Munthe-Kaas, BIT 38, 92–111 (1998).
+    Reference: P. J. Prince and J. R. Dormand, J. Comput. Appl. Math. 7, 67–75 (1981);
+    H. Munthe-Kaas, BIT 38, 92–111 (1998).
 
     Example:
         >>> import jax.numpy as jnp, jaxrot

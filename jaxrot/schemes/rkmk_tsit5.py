@@ -14,7 +14,8 @@ class RKMKTsit5(AbstractLieRungeKutta):
     stages after the last nonzero solution weight are skipped, so a step calls the
     torque ``torque_evals_per_step`` times; `step_with_error` evaluates them all.
 
-    Reference: C. Tsitouras, Comput. Math. Appl. 62, 770–775 (2011); H. Munthe-Kaas, BIT 38, 92–111 (1998).
+    Reference: C. Tsitouras, Comput. Math. Appl. 62, 770–775 (2011);
+    H. Munthe-Kaas, BIT 38, 92–111 (1998).
 
     Example:
         >>> import jax.numpy as jnp, jaxrot
