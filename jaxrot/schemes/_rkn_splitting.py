@@ -14,6 +14,7 @@ from typing import ClassVar
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.extend import core as jex_core
 
@@ -126,26 +127,48 @@ class AbstractRKNSplitting(AbstractScheme):
 
     def step(self, carry, t, dt, inertia, torque, args):
         (q, omega), tau, moments, principal = carry
+        dtype = q.dtype
+        to_body = quat.conjugate(principal)
+        kicks, rotors = np.asarray(self.kick_weights), np.asarray(self.rotor_weights)
+
+        def rotor(q_p, omega, weight):
+            return free_motion(q_p, omega, moments, weight * dt)
+
+        def kick(q_p, omega, weight, elapsed):
+            tau = world_torque(torque, t + elapsed * dt, quat.multiply(q_p, to_body), omega, args)
+            return omega + _kick(q_p, moments, (weight * dt) * tau), tau
+
+        # One (rotor, kick) pair per scan iteration: the step compiles one rotor, not fifteen.
         q_p = quat.multiply(q, principal)
-        kicks, rotors = list(self.kick_weights), list(self.rotor_weights)
-        elapsed = 0.0
-        sequence = []
-        for i in range(len(kicks) + len(rotors)):
-            is_kick = (i % 2 == 0) == self.kick_first
-            sequence.append(("kick", kicks.pop(0)) if is_kick else ("rotor", rotors.pop(0)))
-        for position, (kind, weight) in enumerate(sequence):
-            if kind == "rotor":
-                q_p, omega = free_motion(q_p, omega, moments, weight * dt)
-                elapsed += weight
-                continue
-            if torque is None:
-                continue
-            if not (self.kick_first and position == 0):
-                tau = world_torque(
-                    torque, t + elapsed * dt, quat.multiply(q_p, quat.conjugate(principal)), omega, args
-                )
-            omega = omega + _kick(q_p, moments, (weight * dt) * tau)
-        q1 = quat.multiply(q_p, quat.conjugate(principal))
+        if self.kick_first:
+            if torque is not None:
+                omega = omega + _kick(q_p, moments, (kicks[0] * dt) * tau)
+            pairs = (rotors, kicks[1:])
+        else:
+            q_p, omega = rotor(q_p, omega, rotors[0])
+            pairs = (rotors[1:], kicks)
+        # Row i: (rotor a_i, kick b_{i+1}) for BAB, (kick b_i, rotor a_{i+1}) for ABA, with the
+        # fraction of the step elapsed at the kick (time advances in the rotor flows only).
+        if self.kick_first:
+            rows = np.stack([pairs[0], pairs[1], np.cumsum(pairs[0])], axis=1)
+        else:
+            elapsed = rotors[0] + np.concatenate([[0.0], np.cumsum(pairs[0])[:-1]])
+            rows = np.stack([pairs[1], pairs[0], elapsed], axis=1)
+
+        def pair(loop, row):
+            q_p, omega, tau = loop
+            if self.kick_first:
+                q_p, omega = rotor(q_p, omega, row[0])
+            if torque is not None:
+                omega, tau = kick(q_p, omega, row[1] if self.kick_first else row[0], row[2])
+            if not self.kick_first:
+                q_p, omega = rotor(q_p, omega, row[1])
+            return (q_p, omega, tau), None
+
+        if tau is None and torque is not None:
+            tau = jnp.zeros_like(omega)
+        (q_p, omega, tau), _ = jax.lax.scan(pair, (q_p, omega, tau), jnp.asarray(rows, dtype))
+        q1 = quat.multiply(q_p, to_body)
         return SplittingCarry(RotState(q1, omega), tau if self.kick_first else None, moments, principal)
 
     def state(self, carry):
