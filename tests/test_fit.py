@@ -154,9 +154,14 @@ def test_recovers_tensor_and_axes_under_a_known_torque():
     assert fit.trajectory.q.shape == obs.q.shape
 
 
+@functools.cache
+def torque_free_fit():
+    return jaxrot.fit_inertia(observations(False)[0])
+
+
 def test_torque_free_determines_only_the_ratios():
     obs, _ = observations(False)
-    fit = jaxrot.fit_inertia(obs)
+    fit = torque_free_fit()
     assert fit.converged and not fit.scale_determined
     np.testing.assert_allclose(jnp.trace(fit.inertia), 1.0, rtol=1e-12)  # the documented normalisation
     true_moments, true_axes = jnp.linalg.eigh(TENSOR)
@@ -187,6 +192,96 @@ def test_observed_angular_velocity_is_used():
     fit = jaxrot.fit_inertia(with_omega, omega_weight=1.0)
     np.testing.assert_allclose(fit.omega0, STATE.omega, atol=1e-3)
     np.testing.assert_allclose(fit.trajectory.omega, ref.omega, atol=1e-2)
+
+
+# --------------------------------------------------------------------------- convergence
+
+
+def true_ratios():
+    moments = np.linalg.eigvalsh(np.asarray(TENSOR))
+    return moments[1:] / moments[0]
+
+
+def fitted_ratios(fit):
+    moments = np.asarray(fit.moments, dtype=np.float64)
+    return moments[1:] / moments[0]
+
+
+def perfect_observations(dtype):
+    """Noise-free orientations stepped by Zhao itself (dt = 0.01, 400 steps, every 20th saved): the model
+    of ``fit_inertia(obs, substeps=20)`` reproduces them exactly, but for round-off."""
+    state = jaxrot.RotState(STATE.q.astype(dtype), STATE.omega.astype(dtype))
+    return jaxrot.rollout("zhao", state, TENSOR.astype(dtype), 0.01, 400, save_every=20)
+
+
+def round_off_floor(obs, **options):
+    """`fit_inertia`'s round-off floor of the objective for torque-free ``obs``."""
+    problem, extra = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
+    return _fit._round_off_floor(problem, float(np.max(np.linalg.norm(extra["omega_estimate"], axis=-1))))
+
+
+def ratio_sensitivity(obs, **options):
+    """Rows ``Mᵀ ∇(I₂/I₁)``, ``Mᵀ ∇(I₃/I₁)`` at the true body, ``M`` the fit's Gauss–Newton whitening.
+
+    ``Mᵀ H M = 𝟙`` for the Hessian ``H = 2 JᵀJ`` of the objective (float64, torque-free, one segment),
+    so near the optimum ``f = f* + ½ |Δz|²`` with ``Δx = M Δz``, and the ratios move by ``rows @ Δz``.
+    """
+    obs = jaxrot.Trajectory(*(None if x is None else jnp.asarray(x, jnp.float64) for x in obs))
+    problem, _ = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
+    chol = _fit.cholesky_from_inertia(TENSOR)
+    params = _fit._Params(jnp.asarray(chol / chol[0]), jnp.zeros((1, 3)), STATE.omega[None])
+    x = _fit._flat(params)
+    free = np.arange(1, x.size)  # chol[0] is fixed in a torque-free fit
+
+    def residuals(vector):
+        return np.asarray(_fit._residuals(_fit._unflat(vector, params, jnp.float64), problem)[0])
+
+    whiten = _fit._whitening(residuals, x, free)
+
+    def ratios(chol):
+        moments = jnp.linalg.eigvalsh(_fit.inertia_from_cholesky(chol, unit_trace=True))
+        return moments[1:] / moments[0]
+
+    gradient = np.asarray(jax.jacfwd(ratios)(jnp.asarray(x[:6])))[:, 1:]  # w.r.t. the free chol[1:]
+    return gradient @ whiten[:5]
+
+
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_a_perfect_fit_converges_in_either_precision(dtype):
+    """Noise-free data: the objective ends at round-off, where only its floor can say "converged"."""
+    obs = perfect_observations(dtype)
+    fit = jaxrot.fit_inertia(obs, substeps=20)
+    floor = round_off_floor(obs, substeps=20)
+    assert fit.converged and fit.loss.dtype == dtype
+    assert 0 <= float(fit.loss) <= floor  # a sum of squares without cancellation: never negative
+    # f = f* + ½|Δz|² with f* >= 0, so |Δz| <= √(2 floor): the ratios are off by at most |row| √(2 floor)
+    # (float64: 4e-13; float32, 400 steps: 2e-4, where the linear start is already at the floor).
+    bound = np.linalg.norm(ratio_sensitivity(obs, substeps=20), axis=1) * np.sqrt(2 * floor)
+    assert np.all(np.abs(fitted_ratios(fit) - true_ratios()) <= bound), (fitted_ratios(fit), bound)
+
+
+def test_a_noisy_fit_converges_within_its_standard_errors():
+    obs, _ = observations(False)
+    fit = torque_free_fit()
+    assert fit.converged
+    assert float(fit.loss) > round_off_floor(obs)  # ended by ftol, not by the round-off floor
+    # Least squares: each of the 3 n residual components carries noise NOISE / √n (the objective is a
+    # mean), so cov(Δz) = 2 (NOISE² / n) 𝟙 in whitened coordinates: one standard error per ratio is
+    # √2 NOISE / √n |row|. 4 of them: a component exceeds that with probability 6e-5; Zhao's bias
+    # (~1e-5 relative) and the ftol stop (0.01 standard errors) are below 0.1 of one.
+    n = obs.t.shape[0]
+    standard_error = np.sqrt(2.0 / n) * NOISE * np.linalg.norm(ratio_sensitivity(obs), axis=1)
+    error = fitted_ratios(fit) - true_ratios()
+    assert np.all(np.abs(error) <= 4 * standard_error), error / standard_error
+
+
+@pytest.mark.parametrize("max_iter", [0, 1])
+def test_max_iter_stops_before_convergence(max_iter):
+    # The linear start misses by ~1e-5 rad (f ≈ 3e-10) and one step leaves f ≈ 3e-19, predicted to drop
+    # by as much again: 7 decades above both the floor (8e-27) and ftol × f.
+    fit = jaxrot.fit_inertia(perfect_observations(jnp.float64), substeps=20, max_iter=max_iter)
+    assert not fit.converged
+    assert fit.n_iterations == max_iter and fit.loss_history.shape == (max_iter + 1,)
 
 
 # --------------------------------------------------------------------------- bad input
