@@ -118,3 +118,22 @@ def central_difference_grad(f, primals, argnum, rel_step=1e-4):
 
         grad.append((-at(2) + 8 * at(1) - 8 * at(-1) + at(-2)) / (12 * h))
     return jnp.stack(grad).reshape(x.shape)
+
+
+def fixed_step_runner(scheme, inertia, torque=None, args=None):
+    """``run(state, dt, n) -> RotState`` after ``n`` steps of one body, one compilation for any dt, n.
+
+    The scheme's own ``init``/``step``/``state`` in a ``fori_loop`` with a runtime trip count, so an
+    order ladder costs one compilation instead of one per rung (`jaxrot.rollout` fixes ``n_steps``
+    at trace time; its equivalence to these methods is tested for every scheme elsewhere).
+    """
+    scheme = jaxrot.schemes.resolve_scheme(scheme)
+    inertia = jaxrot.body_inertia(inertia)
+
+    @jax.jit
+    def run(state, dt, n):
+        carry = scheme.init(state, jnp.zeros((), state.q.dtype), inertia, torque, args)
+        step = lambda i, c: scheme.step(c, i.astype(dt.dtype) * dt, dt, inertia, torque, args)
+        return scheme.state(jax.lax.fori_loop(0, n, step, carry))
+
+    return lambda state, dt, n: run(state, jnp.asarray(dt, state.q.dtype), n)

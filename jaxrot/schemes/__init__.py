@@ -10,7 +10,6 @@ from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
 from .rkmk4 import RKMK4 as RKMK4
 from .rkmk_dopri5 import RKMKDopri5 as RKMKDopri5
 from .rkmk_dopri8 import RKMKDopri8 as RKMKDopri8
-from .rkmk_tsit5 import RKMKTsit5 as RKMKTsit5
 from .rozmanov import Rozmanov as Rozmanov, RozmanovCarry as RozmanovCarry
 from .splitting import Splitting as Splitting, SplittingCarry as SplittingCarry
 from .srkn6b import SRKN6b as SRKN6b
@@ -28,7 +27,6 @@ SCHEMES = MappingProxyType(
             NoSquish(),
             Splitting(),
             RKMK4(),
-            RKMKTsit5(),
             RKMKDopri5(),
             RKMKDopri8(),
             SRKN6b(),

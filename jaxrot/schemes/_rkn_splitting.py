@@ -114,7 +114,7 @@ class AbstractRKNSplitting(AbstractScheme):
             raise ValueError(
                 f"`torque` depends on the angular velocity, which breaks the order of the {self.name!r} "
                 "splitting (its kicks are exact only for torques of (t, q)). Use a scheme that handles "
-                "velocity-dependent torques: 'rkmk4', 'rkmk_tsit5', 'rkmk_dopri5', 'rkmk_dopri8' "
+                "velocity-dependent torques: 'rkmk4', 'rkmk_dopri5', 'rkmk_dopri8' "
                 "(any order), or 'zhao', 'splitting' (second order)."
             )
 
@@ -142,10 +142,10 @@ class AbstractRKNSplitting(AbstractScheme):
         q_p = quat.multiply(q, principal)
         if self.kick_first:
             if torque is not None:
-                omega = omega + _kick(q_p, moments, (kicks[0] * dt) * tau)
+                omega = omega + _kick(q_p, moments, (float(kicks[0]) * dt) * tau)
             pairs = (rotors, kicks[1:])
         else:
-            q_p, omega = rotor(q_p, omega, rotors[0])
+            q_p, omega = rotor(q_p, omega, float(rotors[0]))
             pairs = (rotors[1:], kicks)
         # Row i: (rotor a_i, kick b_{i+1}) for BAB, (kick b_i, rotor a_{i+1}) for ABA, with the
         # fraction of the step elapsed at the kick (time advances in the rotor flows only).

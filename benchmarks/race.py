@@ -1,0 +1,251 @@
+"""The speed/accuracy race: every jaxrot scheme against diffrax's Tsit5, Dopri5 and Dopri8.
+
+For each scene, ``N`` bodies (default 1000) get random orientations and random
+body-frame spins (each component normal with standard deviation 3 rad/s) and
+keep the scene's inertia, torque and horizon. Every scheme in `jaxrot.SCHEMES`
+runs on a ladder of step counts growing by √2 (from 8 steps over the horizon
+until the error is below ``--floor``, stops falling, or a run takes longer than
+``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and Dopri8 run on the same
+`Euclidean` quaternion ODE as `jaxrot.reference_rollout` (normalised at the end)
+with a PID controller at rtol = atol on a half-decade ladder 1e-2 … 1e-13. The
+error of a row is the largest geodesic orientation error over all bodies at the
+final time against Dopri8 at rtol = atol = 1e-14 in float64. Each row is one
+compiled program (step count and tolerance are runtime values, so each method
+compiles once) timed as the median of ``--repeats`` runs of the whole batch.
+
+The table gives, for each budget 1e-2 … 1e-10 rad (1e-2 … 1e-5 in float32), the
+fastest jaxrot row and the fastest diffrax row meeting it and their ratio
+(> 1: jaxrot is faster). A plot of error against wall time goes to ``--out``.
+
+    python benchmarks/race.py                                  # the three race scenes, float64
+    python benchmarks/race.py --scenes heavy_top --dtype float32 --n 1000
+"""
+
+import argparse
+import json
+import math
+import statistics
+import time
+from pathlib import Path
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxrot
+from jaxrot import quaternion as quat
+from jaxrot._inertia import body_inertia
+from jaxrot._particles import PARTICLES
+from jaxrot._reference import adaptive_solve
+from jaxrot.comparison import machine_info, plot_work_precision
+
+
+DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_dopri5": diffrax.Dopri5, "diffrax_dopri8": diffrax.Dopri8}
+BUDGETS = {"float64": [10.0**-k for k in range(2, 11)], "float32": [10.0**-k for k in range(2, 6)]}
+REFERENCE_TOL = 1e-14
+
+
+def random_bodies(scene, n, dtype, seed=0):
+    """``n`` bodies with the scene's inertia: random orientations, random spins of a few rad/s."""
+    key_q, key_w = jax.random.split(jax.random.PRNGKey(seed))
+    q = quat.normalize(jax.random.normal(key_q, (n, 4), dtype=jnp.float64))
+    omega_body = 3.0 * jax.random.normal(key_w, (n, 3), dtype=jnp.float64)
+    return jaxrot.RotState(q.astype(dtype), quat.rotate(q, omega_body).astype(dtype))
+
+
+def timed(compiled, *args, repeats):
+    out = jax.block_until_ready(compiled(*args))
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        samples.append(time.perf_counter() - start)
+    return out, statistics.median(samples)
+
+
+def fixed_step_runner(scheme, scene):
+    """One compiled program for any step count: ``init``, then ``n`` steps, vmapped over bodies."""
+    inertia = body_inertia(scene.inertia)
+
+    def run(state, dt, n):
+        def one(q, omega):
+            carry = scheme.init(
+                jaxrot.RotState(q, omega), jnp.zeros((), q.dtype), inertia, scene.torque, scene.args
+            )
+
+            def body(i, c):
+                return scheme.step(c, i.astype(q.dtype) * dt, dt, inertia, scene.torque, scene.args)
+
+            return scheme.state(jax.lax.fori_loop(0, n, body, carry))
+
+        return jax.vmap(one, axis_name=PARTICLES)(state.q, state.omega)
+
+    return jax.jit(run)
+
+
+def adaptive_runner(solver, scene, t_end):
+    def run(state, tol):
+        ts = jnp.array([0.0, t_end], state.q.dtype)
+        traj, result, steps = adaptive_solve(
+            solver(), state.q, state.omega, scene.inertia, False, ts, scene.torque, scene.args, tol, tol,
+            1_000_000, None,
+        )  # fmt: skip
+        return jaxrot.RotState(traj.q[-1], traj.omega[-1]), result, steps
+
+    return jax.jit(run)
+
+
+def error_of(q, q_ref):
+    return float(jnp.max(quat.angle_between(jnp.asarray(q, jnp.float64), q_ref)))
+
+
+def race(
+    scene_name, *, n=1000, dtype="float64", repeats=3, floor=None, time_cap=2.0, schemes=None, log=print
+):
+    dtype_ = {"float64": jnp.float64, "float32": jnp.float32}[dtype]
+    scene64 = jaxrot.SCENES[scene_name](jnp.float64)
+    scene = jaxrot.SCENES[scene_name](dtype_)
+    t_end = scene.t_end
+    floor = floor if floor is not None else BUDGETS[dtype][-1] / 3
+    state64 = random_bodies(scene, n, jnp.float64)
+    state = jax.tree_util.tree_map(lambda x: x.astype(dtype_), state64)
+    ref = jaxrot.reference_rollout(
+        state64, scene64.inertia, jnp.array([0.0, t_end]), torque=scene64.torque, args=scene64.args,
+        rtol=REFERENCE_TOL, atol=REFERENCE_TOL,
+    )  # fmt: skip
+    q_ref = ref.q[-1]
+    rows = []
+    common = {"scene": scene_name, "dtype": dtype, "particles": n}
+    for name in schemes or list(jaxrot.SCHEMES):
+        scheme = jaxrot.SCHEMES[name]
+        try:
+            runner = fixed_step_runner(scheme, scene)
+            start = time.perf_counter()
+            compiled = runner.lower(state, jnp.asarray(1.0, dtype_), 1).compile()
+        except ValueError as err:  # a splitting refusing a velocity-dependent torque
+            log(f"  {name}: skipped ({str(err).split('.')[0]})")
+            continue
+        compile_s = time.perf_counter() - start
+        errors, k = [], 0
+        while True:
+            steps = int(round(8 * 2 ** (k / 2)))
+            dt = t_end / steps
+            out, seconds = timed(compiled, state, jnp.asarray(dt, dtype_), steps, repeats=repeats)
+            err = error_of(out.q, q_ref)
+            evals = (
+                0
+                if scene.torque is None
+                else scheme.torque_evals_per_step * steps + scheme.torque_evals_at_init
+            )
+            rows.append(
+                {**common, "method": name, "kind": "fixed", "dt": dt, "tol": None, "n_steps": steps,
+                 "max_orientation_error_rad": err, "torque_evals": evals, "seconds": seconds,
+                 "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s}
+            )  # fmt: skip
+            log(f"  {name:12s} steps {steps:7d}  err {err:9.2e}  {seconds * 1e3:9.2f} ms")
+            errors.append(err)
+            k += 1
+            stalled = len(errors) >= 3 and errors[-1] > 0.7 * errors[-3] and errors[-1] < 1e-3
+            if err < floor or seconds > time_cap or stalled or not math.isfinite(err) and k > 20:
+                break
+    for name, solver in DIFFRAX.items():
+        runner = adaptive_runner(solver, scene, t_end)
+        start = time.perf_counter()
+        compiled = runner.lower(state, jnp.asarray(1e-6, dtype_)).compile()
+        compile_s = time.perf_counter() - start
+        lowest = 13 if dtype == "float64" else 7
+        for tol in [10 ** (-k / 2) for k in range(4, 2 * lowest + 1)]:
+            (out, result, steps), seconds = timed(compiled, state, jnp.asarray(tol, dtype_), repeats=repeats)
+            if np.any(np.asarray(result != diffrax.RESULTS.successful)):
+                log(f"  {name}: failed at tol {tol:.1e}")
+                continue
+            err = error_of(out.q, q_ref)
+            mean_steps = float(np.mean(np.asarray(steps)))
+            stages = solver.tableau.num_stages - (1 if solver.tableau.fsal else 0)
+            evals = 0 if scene.torque is None else int(round(stages * mean_steps)) + 1
+            rows.append(
+                {**common, "method": name, "kind": "adaptive", "dt": None, "tol": tol,
+                 "n_steps": int(round(mean_steps)), "max_orientation_error_rad": err, "torque_evals": evals,
+                 "seconds": seconds, "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s}
+            )  # fmt: skip
+            log(f"  {name:15s} tol {tol:8.1e} steps {mean_steps:8.1f} err {err:9.2e} {seconds * 1e3:9.2f} ms")
+            if err < floor or seconds > 4 * time_cap:
+                break
+    return rows
+
+
+def race_table(rows, budgets):
+    """``[(budget, fastest jaxrot row, fastest diffrax row, ratio)]``; ratio > 1 means jaxrot is faster."""
+    table = []
+    for budget in budgets:
+        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        ours = min((r for r in ok if r["kind"] == "fixed"), key=lambda r: r["seconds"], default=None)
+        theirs = min((r for r in ok if r["kind"] == "adaptive"), key=lambda r: r["seconds"], default=None)
+        ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
+        table.append((budget, ours, theirs, ratio))
+    return table
+
+
+def _label(row):
+    if row is None:
+        return "none"
+    setting = f"{row['n_steps']} steps" if row["kind"] == "fixed" else f"tol {row['tol']:.0e}"
+    return f"{row['method']} {setting} {row['seconds'] * 1e3:.3g} ms"
+
+
+def format_race(scene_name, dtype, table):
+    lines = [
+        f"### {scene_name}, {dtype}",
+        "| budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
+        "|---|---|---|---|",
+    ]
+    for budget, ours, theirs, ratio in table:
+        r = "—" if ratio is None else f"{ratio:.2f}"
+        lines.append(f"| {budget:.0e} | {_label(ours)} | {_label(theirs)} | {r} |")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--scenes", default="heavy_top,viscous_drag,dipole_rotating_field")
+    parser.add_argument("--dtype", default="float64", choices=["float64", "float32"])
+    parser.add_argument("--n", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--time-cap", type=float, default=2.0, help="stop a ladder past this many s per run")
+    parser.add_argument("--schemes", default=None, help="comma-separated names (default: all)")
+    parser.add_argument("--out", default="docs/race")
+    opts = parser.parse_args()
+    out = Path(opts.out)
+    out.mkdir(parents=True, exist_ok=True)
+    info = machine_info()
+    print(f"machine: {info}")
+    report = {"machine": info, "scenes": {}}
+    schemes = opts.schemes.split(",") if opts.schemes else None
+    for scene_name in opts.scenes.split(","):
+        print(f"== {scene_name} ({opts.dtype}, N = {opts.n})", flush=True)
+        rows = race(scene_name, n=opts.n, dtype=opts.dtype, repeats=opts.repeats, time_cap=opts.time_cap,
+                    schemes=schemes, log=lambda s: print(s, flush=True))  # fmt: skip
+        table = race_table(rows, BUDGETS[opts.dtype])
+        print(format_race(scene_name, opts.dtype, table), flush=True)
+        stem = f"race_{scene_name}_{opts.dtype}"
+        plot_work_precision(rows, out / f"{stem}.png")
+        report["scenes"][scene_name] = {
+            "rows": rows,
+            "table": [
+                {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
+                for b, o, d, r in table
+            ],
+        }
+        with open(out / f"race_{opts.dtype}.json", "w") as f:
+            json.dump(report, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

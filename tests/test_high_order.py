@@ -1,0 +1,315 @@
+"""The high-order schemes: Lie-group Runge–Kutta (RKMK) and the Blanes–Moan splittings.
+
+Orders are fitted (log-log) over rungs in each scheme's asymptotic range and above
+round-off, against diffrax Dopri8 at rtol = atol = 1e-14, with an orientation-, a
+time- and (RKMK only) a velocity-dependent torque, diagonal and full inertia.
+"""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import (
+    MOMENTS,
+    PRINCIPAL_TO_BODY,
+    central_difference_grad,
+    fitted_order,
+    fixed_step_runner,
+    full_tensor,
+    gravity_args,
+    principal_state,
+    to_body_frame,
+)
+
+import jaxrot
+from jaxrot import quaternion as quat, torques
+from jaxrot.scenes import gravity_torque
+from jaxrot.schemes import AbstractLieRungeKutta, AbstractRKNSplitting
+from jaxrot.schemes._lie_runge_kutta import exp_and_dexpinv
+from jaxrot.schemes._rkn_splitting import palindrome, uses_omega
+
+
+LIE_RK = ["rkmk4", "rkmk_dopri5", "rkmk_dopri8"]
+SPLITTINGS = ["srkn6b", "srkn14a"]
+T_END = 2.0
+TUMBLING = principal_state(omega_body=jnp.array([1.0, 2.0, 0.5]))
+FIELD = {
+    "moment_body": jnp.array([0.5, 0.2, 1.0]),
+    "amplitude": jnp.array(1.0),
+    "angular_frequency": jnp.array(1.0),
+}
+
+# Step counts over T_END: errors between ~1e-6 and ~1e-12 (round-off is ~1e-14 here), where the
+# local slopes have settled (measured: RKMK-Dopri8 on ω-dependent drag needs errors below ~1e-9).
+LADDERS = {
+    "rkmk4": (40, 80, 160, 320),
+    "rkmk_dopri5": (20, 40, 80, 160),
+    "rkmk_dopri8": (8, 11, 16, 23),
+    "srkn6b": (40, 80, 160),
+    "srkn14a": (8, 11, 16),
+}
+
+
+def problem(kind, form):
+    """``(state, inertia, torque, args)``: ``kind`` orientation / time / velocity dependence."""
+    r = None if form == "diagonal" else PRINCIPAL_TO_BODY
+    field = dict(FIELD)
+    if r is not None:
+        field["moment_body"] = quat.rotate(r, field["moment_body"])
+    torque, args = {
+        "orientation": (gravity_torque, gravity_args(r=r)),
+        "time": (torques.RotatingField(), {"rotating_field": field}),
+        "velocity": (
+            torques.ViscousDrag() + torques.RotatingField(),
+            {"drag": {"coefficient": jnp.array(0.3)}, "rotating_field": field},
+        ),
+    }[kind]
+    if form == "diagonal":
+        return TUMBLING, MOMENTS, torque, args
+    return to_body_frame(TUMBLING), full_tensor(), torque, args
+
+
+def measured_order(name, kind, form):
+    state, inertia, torque, args = problem(kind, form)
+    ref = jaxrot.reference_rollout(
+        state, inertia, jnp.array([0.0, T_END]), torque=torque, args=args, rtol=1e-14, atol=1e-14
+    )
+    run = fixed_step_runner(name, inertia, torque, args)
+    steps = np.array(LADDERS[name])
+    errors = [float(quat.angle_between(run(state, T_END / n, n).q, ref.q[-1])) for n in steps]
+    assert min(errors) > 5e-14  # above the reference's and the arithmetic's round-off
+    return fitted_order(T_END / steps, errors)
+
+
+# The default run covers every scheme and torque kind once, alternating inertia forms; the full
+# matrix is in the slow set.
+QUICK = [
+    ("rkmk4", "orientation", "diagonal"),
+    ("rkmk4", "velocity", "full"),
+    ("rkmk_dopri5", "time", "diagonal"),
+    ("rkmk_dopri5", "orientation", "full"),
+    ("rkmk_dopri8", "velocity", "diagonal"),
+    ("rkmk_dopri8", "time", "full"),
+    ("srkn6b", "orientation", "diagonal"),
+    ("srkn6b", "time", "full"),
+    ("srkn14a", "time", "diagonal"),
+    ("srkn14a", "orientation", "full"),
+]
+FULL = [
+    (name, kind, form)
+    for name in LIE_RK + SPLITTINGS
+    for kind in ("orientation", "time") + (("velocity",) if name in LIE_RK else ())
+    for form in ("diagonal", "full")
+    if (name, kind, form) not in QUICK
+]
+
+
+@pytest.mark.parametrize(("name", "kind", "form"), QUICK)
+def test_measured_order(name, kind, form):
+    assert measured_order(name, kind, form) == pytest.approx(jaxrot.SCHEMES[name].order, abs=0.2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "kind", "form"), FULL)
+def test_measured_order_full_matrix(name, kind, form):
+    assert measured_order(name, kind, form) == pytest.approx(jaxrot.SCHEMES[name].order, abs=0.2)
+
+
+def test_metadata():
+    expected = {
+        "rkmk4": (4, 4),
+        "rkmk_dopri5": (5, 6),
+        "rkmk_dopri8": (8, 13),
+        "srkn6b": (4, 6),
+        "srkn14a": (6, 14),
+    }
+    for name, (order, evals) in expected.items():
+        scheme = jaxrot.SCHEMES[name]
+        assert (scheme.name, scheme.order, scheme.torque_evals_per_step) == (name, order, evals)
+    assert jaxrot.SCHEMES["rkmk_dopri8"].tableau is diffrax.Dopri8.tableau  # read, not retyped
+    assert jaxrot.SCHEMES["srkn6b"].torque_evals_at_init == 1  # BAB: the last kick's torque is reused
+    assert jaxrot.SCHEMES["srkn14a"].torque_evals_at_init == 0
+
+
+@pytest.mark.parametrize("name", LIE_RK + SPLITTINGS)
+def test_torque_calls_per_step_are_counted(name):
+    """The callable is called (traced) exactly as often as the metadata says."""
+    calls = []
+
+    def counting(t, q, omega, args):
+        # Splittings also trace the torque once in `init` to read its ω-dependence: not a call.
+        calls.append(not isinstance(omega, jax.ShapeDtypeStruct | jax.core.Tracer) or traced_step[0])
+        return gravity_torque(t, q, omega, args)
+
+    traced_step = [False]
+    scheme = jaxrot.SCHEMES[name]
+    carry = scheme.init(TUMBLING, 0.0, MOMENTS, counting, gravity_args())
+    at_init = sum(calls)
+    traced_step[0] = True
+    jax.make_jaxpr(lambda c: scheme.step(c, 0.0, 0.1, MOMENTS, counting, gravity_args()))(carry)
+    traced = sum(calls) - at_init
+    assert at_init == scheme.torque_evals_at_init
+    # A splitting traces one (rotor, kick) pair inside a scan over the pairs of a step.
+    assert traced == (scheme.torque_evals_per_step if name in LIE_RK else 1)
+
+
+def test_adding_a_lie_group_method_is_a_few_lines():
+    class Heun(AbstractLieRungeKutta):
+        name = "rkmk_heun"
+        order = 2
+        tableau = diffrax.Heun.tableau
+
+    traj = jaxrot.rollout(Heun(), TUMBLING, MOMENTS, 0.01, 10)
+    assert Heun.torque_evals_per_step == 2
+    np.testing.assert_allclose(jnp.linalg.norm(traj.q, axis=-1), 1, atol=1e-14)
+
+
+def test_coefficients_are_validated_on_definition():
+    with pytest.raises(TypeError, match="sum to 1"):
+
+        class Bad(AbstractRKNSplitting):
+            name = "bad"
+            order = 2
+            kick_weights = (0.5, 0.6)
+            rotor_weights = (1.0,)
+
+    with pytest.raises(TypeError, match="palindromic"):
+
+        class Skewed(AbstractRKNSplitting):
+            name = "skewed"
+            order = 2
+            kick_weights = (0.4, 0.6)
+            rotor_weights = (1.0,)
+
+    with pytest.raises(TypeError, match="explicit"):
+
+        class Implicit(AbstractLieRungeKutta):
+            name = "implicit"
+            order = 1
+            tableau = diffrax.Kvaerno3.tableau
+
+    assert palindrome((1, 2), (3,)) == (1, 2, 3, 2, 1)
+
+
+def test_blanes_moan_coefficients_match_the_published_digits():
+    """The middle weights are derived from the sums; they must equal the published ones."""
+    srkn6b, srkn14a = jaxrot.SCHEMES["srkn6b"], jaxrot.SCHEMES["srkn14a"]
+    assert srkn6b.kick_weights[3] == pytest.approx(0.1195241940131508, abs=1e-16)
+    assert srkn6b.rotor_weights[2] == pytest.approx(-0.350171622895351, abs=1e-15)
+    assert srkn14a.rotor_weights[7] == pytest.approx(0.2073050690568954, abs=1e-16)
+    assert srkn14a.kick_weights[6] == pytest.approx(-0.19641146648645423, abs=1e-16)
+
+
+# --- dexp⁻¹ and exp at and near Θ = 0 -------------------------------------------------------
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-300, 1e-12, 1e-5, 1e-3, 0.3, 2.0])
+def test_exp_and_dexpinv_finite_and_true_near_zero(scale):
+    theta = scale * jnp.array([0.3, -0.5, 0.8])
+    w = jnp.array([1.0, 2.0, -0.5])
+    rotation, v = exp_and_dexpinv(theta, w)
+    np.testing.assert_allclose(rotation, quat.exp(theta), rtol=0, atol=2e-16)
+    # dexp_Θ(dexp⁻¹_Θ(w)) = w, with dexp_Θ(v) = v + (1 − cos θ)/θ² Θ×v + (θ − sin θ)/θ³ Θ×(Θ×v)
+    # (series below θ = 1e-3, whose truncation is then below 1e-16).
+    th = float(jnp.linalg.norm(theta))
+    a = (1 - np.cos(th)) / th**2 if th > 1e-3 else 0.5 - th**2 / 24
+    b = (th - np.sin(th)) / th**3 if th > 1e-3 else 1 / 6 - th**2 / 120
+    back = v + a * jnp.cross(theta, v) + b * jnp.cross(theta, jnp.cross(theta, v))
+    np.testing.assert_allclose(back, w, rtol=0, atol=1e-14)
+
+    def scalar(theta):
+        r, v = exp_and_dexpinv(theta, w)
+        return jnp.sum(r * jnp.arange(1.0, 5.0)) + jnp.sum(v * jnp.array([0.3, -1.0, 2.0]))
+
+    grad = jax.grad(scalar)(theta)
+    assert bool(jnp.all(jnp.isfinite(grad)))
+    if scale in (1e-3, 0.3, 2.0):
+        np.testing.assert_allclose(grad, central_difference_grad(scalar, (theta,), 0), rtol=1e-7, atol=1e-9)
+
+
+# --- gradients, invariants, float32 ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", LIE_RK + SPLITTINGS)
+def test_gradients_match_central_differences(name):
+    """d(final orientation · fixed vector)/d(inertia, ω0, weight) through 20 steps."""
+    run_args = gravity_args()
+
+    def loss(moments, omega_body, weight):
+        args = {**run_args, "weight": weight * jnp.array([0.0, 0.0, -1.0])}
+        state = principal_state(omega_body=omega_body)
+        traj = jaxrot.rollout(name, state, moments, 0.05, 20, torque=gravity_torque, args=args, save_every=20)
+        return jnp.sum(traj.q[-1] * jnp.array([0.2, -0.4, 0.5, 0.7])) + jnp.sum(traj.omega[-1])
+
+    # Moments off the triangle-inequality boundary (1 + 2 = 3), so central differences stay valid.
+    primals = (jnp.array([1.2, 2.0, 3.0]), jnp.array([1.0, 2.0, 0.5]), jnp.array(9.81))
+    grads = jax.grad(loss, argnums=(0, 1, 2))(*primals)
+    for k in range(3):
+        assert bool(jnp.all(jnp.isfinite(grads[k])))
+        np.testing.assert_allclose(grads[k], central_difference_grad(loss, primals, k), rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", LIE_RK + SPLITTINGS)
+def test_zero_angular_velocity_and_zero_torque_give_finite_gradients(name):
+    def loss(omega):
+        traj = jaxrot.rollout(
+            name, jaxrot.RotState(quat.exp(jnp.array([0.2, 0, 0.1])), omega), MOMENTS, 0.1, 5
+        )
+        return jnp.sum(traj.q[-1]) + jnp.sum(traj.omega[-1])
+
+    grad = jax.grad(loss)(jnp.zeros(3))
+    assert bool(jnp.all(jnp.isfinite(grad)))
+
+
+@pytest.mark.parametrize("name", LIE_RK + SPLITTINGS)
+def test_float32_keeps_unit_norm_over_ten_thousand_steps(name):
+    """|q| − 1 < 1e-5 after 10⁴ float32 steps (q is renormalised each step: the bound is a few ulp)."""
+    state = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), TUMBLING)
+    args = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), gravity_args())
+    run = fixed_step_runner(name, MOMENTS.astype(jnp.float32), gravity_torque, args)
+    out = run(state, 1e-3, 10_000)
+    assert out.q.dtype == jnp.float32
+    assert abs(float(jnp.linalg.norm(out.q)) - 1) < 1e-5
+    assert bool(jnp.all(jnp.isfinite(out.omega)))
+
+
+@pytest.mark.parametrize("name", LIE_RK)
+def test_torque_free_invariants_over_a_long_run(name):
+    """A free body over 2000 steps of 0.01: |L| and energy to 1e-9 relative (the truncation error of
+    an order ≥ 4 method at |ω| dt ≈ 0.02 is ~1e-10 per unit time here), |q| = 1 to round-off."""
+    run = fixed_step_runner(name, MOMENTS)
+    out = run(TUMBLING, 0.01, 2000)
+    l0 = quat.rotate(TUMBLING.q, MOMENTS * quat.rotate(quat.conjugate(TUMBLING.q), TUMBLING.omega))
+    l1 = quat.rotate(out.q, MOMENTS * quat.rotate(quat.conjugate(out.q), out.omega))
+    np.testing.assert_allclose(l1, l0, rtol=0, atol=1e-9 * float(jnp.linalg.norm(l0)))
+    energy = lambda s: jaxrot.diagnostics.kinetic_energy(s.q, s.omega, MOMENTS)
+    assert float(jnp.abs(energy(out) / energy(TUMBLING) - 1)) < 1e-9
+    assert abs(float(jnp.linalg.norm(out.q)) - 1) < 1e-14
+
+
+# --- ω-dependence of the torque --------------------------------------------------------------
+
+
+def test_uses_omega_reads_the_jaxpr():
+    q, w = TUMBLING
+    assert uses_omega(torques.ViscousDrag(), 0.0, q, w, {"drag": {"coefficient": jnp.array(0.1)}})
+    assert not uses_omega(gravity_torque, 0.0, q, w, gravity_args())
+    assert not uses_omega(torques.RotatingField(), 0.0, q, w, {"rotating_field": FIELD})
+    # Through jit, and ω multiplied by zero still counts (conservative, read from the graph).
+    assert uses_omega(jax.jit(lambda t, q, w, a: 0.0 * w), 0.0, q, w, None)
+    assert not uses_omega(jax.jit(lambda t, q, w, a: q[1:] * t), 0.0, q, w, None)
+
+
+@pytest.mark.parametrize("name", SPLITTINGS)
+def test_splittings_refuse_velocity_dependent_torques(name):
+    state, inertia, torque, args = problem("velocity", "diagonal")
+    with pytest.raises(ValueError, match="depends on the angular velocity.*rkmk"):
+        jaxrot.rollout(name, state, inertia, 0.1, 2, torque=torque, args=args)
+
+
+def test_splittings_accept_a_coupled_torque():
+    """The dipole cloud's torque gathers the other bodies over the particle axis: detection works there."""
+    scene = jaxrot.SCENES["dipole_cloud"]()
+    traj = jaxrot.rollout("srkn6b", scene.state, scene.inertia, 0.01, 2, torque=scene.torque, args=scene.args)
+    assert bool(jnp.all(jnp.isfinite(traj.q)))
