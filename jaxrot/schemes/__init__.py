@@ -3,7 +3,10 @@
 from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
-from ._lie_runge_kutta import AbstractLieRungeKutta as AbstractLieRungeKutta
+from ._lie_runge_kutta import (
+    AbstractLieRungeKutta as AbstractLieRungeKutta,
+    LieRungeKuttaCarry as LieRungeKuttaCarry,
+)
 from ._rkn_splitting import AbstractRKNSplitting as AbstractRKNSplitting
 from .euler import Euler as Euler
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry

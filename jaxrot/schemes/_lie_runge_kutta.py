@@ -20,10 +20,11 @@ Reference:
     2nd ed., Springer (2006), section IV.8.
 """
 
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -94,13 +95,32 @@ def _last_needed_stage(tableau: diffrax.ButcherTableau, with_error: bool) -> int
     return needed
 
 
+class LieRungeKuttaCarry(NamedTuple):
+    """What a Lie-group RK scheme carries between steps (one body).
+
+    Attributes:
+        state: the `RotState` ``(q (4,), omega (3,))``.
+        momentum: world angular momentum ``L = R I Rᵀ ω`` ``(3,)``, the variable the
+            scheme integrates. Carried rather than rebuilt from ``ω`` each step, so a
+            torque-free body keeps ``L`` exactly (rebuilt, float32 drifted 1.2e-2 in 10⁵ steps).
+    """
+
+    state: RotState
+    momentum: jax.Array
+
+
+def _momentum(state, inertia):
+    q, omega = state
+    return rotate(q, inertia.apply(rotate(conjugate(q), omega)))
+
+
 class AbstractLieRungeKutta(AbstractScheme):
     """A Runge–Kutta–Munthe-Kaas scheme driven by a `diffrax.ButcherTableau`.
 
     Subclasses set ``name``, ``order``, ``tableau`` (explicit) and, for an embedded
     pair, ``has_error_estimate = True``. ``torque_evals_per_step`` follows from the
     tableau: stages after the last nonzero weight of ``b_sol`` are not evaluated.
-    The carry is the plain `RotState`; any torque is supported (time-,
+    The carry is a `LieRungeKuttaCarry`; any torque is supported (time-,
     orientation- and velocity-dependent, coupled bodies, drives).
     """
 
@@ -118,6 +138,15 @@ class AbstractLieRungeKutta(AbstractScheme):
             raise TypeError(f"{cls.__name__} claims an error estimate but its tableau's b_error is zero.")
         cls.torque_evals_per_step = _last_needed_stage(tableau, with_error=False)
 
+    def init(self, state, t0, inertia, torque, args):
+        return LieRungeKuttaCarry(state, _momentum(state, body_inertia(inertia)))
+
+    def state(self, carry):
+        return carry.state
+
+    def with_state(self, carry, state, inertia):
+        return LieRungeKuttaCarry(state, _momentum(state, body_inertia(inertia)))
+
     def step(self, carry, t, dt, inertia, torque, args):
         return self._step(carry, t, dt, inertia, torque, args, with_error=False)[0]
 
@@ -134,12 +163,11 @@ class AbstractLieRungeKutta(AbstractScheme):
     def _step(self, carry, t, dt, inertia, torque, args, *, with_error):
         tableau = self.tableau
         inertia = body_inertia(inertia)
-        q0, omega0 = carry
+        (q0, omega0), momentum0 = carry
 
         def omega_of(q, momentum):
             return rotate(q, inertia.solve(rotate(conjugate(q), momentum)))
 
-        momentum0 = stage(rotate(q0, inertia.apply(rotate(conjugate(q0), omega0))))
         c = np.concatenate([[0.0], tableau.c])
         ks, taus = [omega0], []
         if torque is not None:
@@ -162,7 +190,7 @@ class AbstractLieRungeKutta(AbstractScheme):
         q1 = stage(normalize(multiply(step_rotation, q0)))
         impulse = None if torque is None else _combination(dt, tableau.b_sol, taus)
         momentum1 = momentum0 if impulse is None else momentum0 + impulse
-        new = RotState(q1, omega_of(q1, momentum1))
+        new = LieRungeKuttaCarry(RotState(q1, omega_of(q1, momentum1)), momentum1)
         if not with_error:
             return new, None
         theta_err = _combination(dt, tableau.b_error, ks)
