@@ -137,3 +137,19 @@ def fixed_step_runner(scheme, inertia, torque=None, args=None):
         return scheme.state(jax.lax.fori_loop(0, n, step, carry))
 
     return lambda state, dt, n: run(state, jnp.asarray(dt, state.q.dtype), n)
+
+
+# Generic contract tests (batching, blocking, chunks, sharding, drives, scenes, extremes) run on
+# every scheme in the slow set and on these by default: the five base schemes, and one member of
+# each tableau-driven family per code path (RKMK; BAB and ABA splittings), whose other members
+# differ only in their coefficients (their orders, gradients and float32 norms are tested by
+# default in tests/test_high_order.py).
+DEFAULT_SCHEMES = {"zhao", "rozmanov", "euler", "no_squish", "splitting", "rkmk4", "srkn6b", "srkn14a"}
+
+
+def scheme_params(names=None):
+    """``names`` (default: every registered scheme) for parametrize, the others marked slow."""
+    import pytest
+
+    names = list(jaxrot.SCHEMES) if names is None else list(names)
+    return [pytest.param(n, marks=() if n in DEFAULT_SCHEMES else pytest.mark.slow) for n in names]

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import scheme_params
 
 import jaxrot
 from jaxrot import quaternion as quat, torques
@@ -54,7 +55,7 @@ ENERGY_BOUND_SECOND_ORDER = 1e-3
 CONSERVATIVE = ["free_top", "heavy_top", "lagrange_top", "dipole_field", "dipole_cloud", "tumbling_cloud"]
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 @pytest.mark.parametrize("name", list(SCENES))
 def test_every_scene_runs_with_every_scheme_and_keeps_its_energy(name, scheme):
     scene = small(name)
@@ -101,7 +102,7 @@ def test_dipole_in_a_uniform_field_keeps_momentum_along_the_field():
     assert float(jnp.max(jnp.abs(along - along[0]))) < 1e-12
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_drag_takes_energy_at_c_omega_squared(scheme):
     """E(T) − E(0) = −∫ c |ω|² dt, to the scheme's accuracy (trapezoid over every step)."""
     scene = small("viscous_drag")
@@ -116,7 +117,7 @@ def test_drag_takes_energy_at_c_omega_squared(scheme):
     assert lost > 0.05 * float(energy[0])  # the drag did something
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_time_and_velocity_dependent_scenes_follow_the_reference(scheme):
     for name in ("dipole_rotating_field", "viscous_drag"):
         scene = small(name)
@@ -269,7 +270,7 @@ def _zero_torque(t, q, omega, args):
     return jnp.zeros(3, q.dtype)
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_torque_free_scene_evaluates_no_torque(scheme):
     calls = []
 
@@ -284,7 +285,7 @@ def test_torque_free_scene_evaluates_no_torque(scheme):
     assert sum(free.values()) < sum(with_torque.values())  # ... and its stage work is gone without it
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_diagonal_inertia_does_no_matrix_products(scheme):
     moments = jnp.array([1.0, 2.0, 3.0])
     diagonal = _rollout_ops(scheme, moments, torque=_zero_torque)
@@ -294,7 +295,7 @@ def test_diagonal_inertia_does_no_matrix_products(scheme):
     assert full.get("matrix_3x3", 0) > 0
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_no_drive_runs_no_drive_code(scheme):
     moments = jnp.array([1.0, 2.0, 3.0])
     plain = _rollout_ops(scheme, moments, torque=_zero_torque)

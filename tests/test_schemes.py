@@ -13,6 +13,7 @@ from helpers import (
     gravity_args,
     order_errors,
     principal_state,
+    scheme_params,
     to_body_frame,
 )
 
@@ -73,7 +74,7 @@ def test_measured_order(name, torque_name, inertia_form):
     assert fitted_order(dts, errors) == pytest.approx(jaxrot.SCHEMES[name].order, abs=0.15)
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_zero_angular_velocity_without_torque_is_at_rest_with_finite_gradients(name):
     q0 = quat.exp(jnp.array([0.2, -0.1, 0.4]))
     traj = jaxrot.rollout(name, jaxrot.RotState(q0, jnp.zeros(3)), MOMENTS, 0.05, 50)
@@ -97,7 +98,7 @@ def test_zero_angular_velocity_without_torque_is_at_rest_with_finite_gradients(n
 # for every scheme: test_gradients_through_1e4_steps_at_extreme_bodies_and_rest in test_stability.py.
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_batch_equals_each_particle_alone(name):
     """Particles do not interact: a batch agrees with each particle alone to 1e-13 (relative).
 
@@ -116,7 +117,7 @@ def test_batch_equals_each_particle_alone(name):
         np.testing.assert_allclose(batch.omega[:, i], alone.omega, rtol=1e-13, atol=1e-15)
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_float32_in_float32_out_and_unit_norm_after_1000_steps(name):
     s32 = heavy_top(dtype=jnp.float32)
     traj = jaxrot.rollout(name, s32.state, s32.inertia, 0.005, 1000, torque=s32.torque, args=s32.args)
@@ -124,7 +125,7 @@ def test_float32_in_float32_out_and_unit_norm_after_1000_steps(name):
     assert float(jnp.max(jnp.abs(jnp.linalg.norm(traj.q, axis=-1) - 1))) < 1e-5
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_float32_round_off_accumulates_slowly(name):
     """1000 float32 steps of the heavy top stay within 1e-4 rad of the same run in float64.
 
@@ -148,7 +149,7 @@ FLOAT32_MOMENTUM_DRIFT = {"zhao": 1e-3, "rozmanov": 1e-3, "no_squish": 1e-3, "sp
 FLOAT32_MOMENTUM_DRIFT |= {"rkmk4": 1e-5, "rkmk_dopri5": 1e-5, "rkmk_dopri8": 1e-5}
 
 
-@pytest.mark.parametrize("name", [n for n in SCHEME_NAMES if jaxrot.SCHEMES[n].order >= 2])
+@pytest.mark.parametrize("name", scheme_params(n for n in SCHEME_NAMES if jaxrot.SCHEMES[n].order >= 2))
 def test_float32_free_body_keeps_unit_norm_and_angular_momentum_over_1e5_steps(name):
     """|q| stays unit and world L stays bounded in float32.
 
@@ -163,7 +164,7 @@ def test_float32_free_body_keeps_unit_norm_and_angular_momentum_over_1e5_steps(n
     assert float(jnp.max(drift)) < FLOAT32_MOMENTUM_DRIFT[name]
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_torque_calls_match_the_declared_count(name):
     calls = []
 
@@ -176,7 +177,7 @@ def test_torque_calls_match_the_declared_count(name):
     assert len(calls) == scheme.torque_evals_per_step * 7 + scheme.torque_evals_at_init
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_gradients_match_central_differences(name):
     """d(loss)/d(rotation vector of q0, omega0, inertia, torque parameter), float64, 1e-6 relative."""
     scheme = Rozmanov(max_iter=20) if name == "rozmanov" else name
@@ -199,7 +200,7 @@ def test_gradients_match_central_differences(name):
         )
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_step_is_usable_alone_and_matches_rollout(name):
     scheme = jaxrot.SCHEMES[name]
     inertia = jaxrot.body_inertia(MOMENTS)

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, assert_same, driven_problem
+from helpers import MOMENTS, assert_same, driven_problem, scheme_params
 from jax.sharding import AxisType, NamedSharding, PartitionSpec as P
 
 import jaxrot
@@ -44,7 +44,7 @@ def sharded_inputs(state, inertia, kwargs, m):
 
 
 @pytest.mark.parametrize("axis_type", [AxisType.Explicit, AxisType.Auto])
-@pytest.mark.parametrize("scheme", sorted(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params(sorted(jaxrot.SCHEMES)))
 def test_sharded_rollout_equals_one_device_and_keeps_the_layout(scheme, axis_type):
     state, inertia, dt, kwargs = problem(16)
     one = jaxrot.rollout(scheme, state, inertia, dt, **kwargs)
