@@ -18,6 +18,7 @@ Example:
 """
 
 from collections.abc import Callable
+from types import MappingProxyType
 from typing import Any, NamedTuple
 
 import jax
@@ -277,18 +278,20 @@ def tumbling_cloud(dtype=jnp.float64, n=256, seed=0) -> Scene:
     )
 
 
-SCENES = {
-    f.__name__: f
-    for f in (
-        free_top,
-        heavy_top,
-        lagrange_top,
-        dipole_field,
-        dipole_rotating_field,
-        viscous_drag,
-        dipole_cloud,
-        tumbling_cloud,
-    )
-}
+SCENES = MappingProxyType(
+    {
+        f.__name__: f
+        for f in (
+            free_top,
+            heavy_top,
+            lagrange_top,
+            dipole_field,
+            dipole_rotating_field,
+            viscous_drag,
+            dipole_cloud,
+            tumbling_cloud,
+        )
+    }
+)
 
 __all__ = ["SCENES", "Scene", "gravity_torque", "per_body", *SCENES]
