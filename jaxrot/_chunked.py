@@ -189,8 +189,8 @@ def rollout_chunks(
     axis 0 equal ``rollout(...)`` with the same arguments, bit for bit: the first
     chunk holds the initial state (index 0) and the states saved in its first
     ``chunk_steps`` steps, each later chunk the states saved in its steps only,
-    and the last chunk may be shorter. Steps after the last saved one are not
-    computed (``n_steps // save_every * save_every`` steps run). Nothing runs
+    and the last chunk may be shorter. As there, ``save_every`` must divide
+    ``n_steps``, so that the last chunk ends on the final state. Nothing runs
     until the first chunk is asked for; the arguments are checked at the call.
 
     Args:
@@ -214,7 +214,8 @@ def rollout_chunks(
         RuntimeWarning: as `jaxrot.rollout`, from the final carry, with the last chunk.
 
     Raises:
-        ValueError: as `jaxrot.rollout`; for a ``chunk_steps`` that is not a
+        ValueError: as `jaxrot.rollout` (a ``save_every`` that does not divide
+            ``n_steps`` included); for a ``chunk_steps`` that is not a
             positive multiple of ``save_every``; for a ``resume`` checkpoint
             whose settings differ (the message names the field). All before
             anything compiles.

@@ -15,7 +15,7 @@ from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_
 from ._runtime_check import check_in_graph, init_report, raise_if_bad, update_report
 from ._sharding import particle_sharded, particle_shards, shard_particles
 from ._state import RotState, Trajectory
-from ._validation import check_bodies, check_count, check_dt, check_torque, is_concrete
+from ._validation import check_bodies, check_count, check_dt, check_save_every, check_torque, is_concrete
 from .schemes import resolve_scheme
 
 
@@ -57,7 +57,8 @@ def rollout(
             a leaf wrapped in `jaxrot.per_body` (particle axes in front) gives
             each body its own value. A coupled torque (`jaxrot.torques`) sees
             all bodies of the rollout.
-        save_every: save one state every ``save_every`` steps.
+        save_every: save one state every ``save_every`` steps; it must divide
+            ``n_steps``, so that the last saved state is the final one.
         t0: initial time.
         drive: a `jaxrot.Drive` imposing angular velocity or moment per body and
             component (Rockable's driven bodies), or None.
@@ -78,8 +79,8 @@ def rollout(
     Returns:
         `Trajectory` with ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)``,
         ``omega`` ``(n_saved, ..., 3)``, ``n_saved = n_steps // save_every + 1``;
-        index 0 is the initial state. Steps after the last saved one are not
-        computed. Arrays keep the dtype of ``state``. With ``return_carry``, a
+        index 0 is the initial state and index -1 the final one. Arrays keep
+        the dtype of ``state`` (float32 or float64). With ``return_carry``, a
         pair ``(trajectory, final_carry)``.
 
     Warns:
@@ -93,9 +94,12 @@ def rollout(
             ``grad`` the same message is raised when the compiled code runs, wrapped
             by jax in ``jax.errors.JaxRuntimeError``.
         ValueError: for a wrong shape, non-finite values, a non-unit ``q``, a
-            non-physical inertia, ``dt <= 0``, ``n_steps < 0``, an unknown scheme or a
-            ``chunk_steps`` that is not a positive multiple of ``save_every``,
-            before anything compiles. Value checks are skipped for traced inputs.
+            non-physical inertia, ``dt <= 0``, ``n_steps < 0``, a ``save_every``
+            that does not divide ``n_steps``, an unknown scheme, a ``chunk_steps``
+            that is not a positive multiple of ``save_every``, or a dtype other
+            than float32/float64 (or ``state.q`` and ``state.omega`` of different
+            dtypes), before anything compiles. Value checks are skipped for
+            traced inputs.
 
     Example:
         >>> import jax.numpy as jnp, jaxrot
@@ -198,7 +202,7 @@ def prepare_run(
     batch_shape = tuple(state.q.shape[:-1])
     dt = check_dt(dt).astype(dtype)
     n_steps = check_count(n_steps, "n_steps", 0)
-    save_every = check_count(save_every, "save_every", 1)
+    save_every = check_save_every(save_every, n_steps)
     check_torque(torque)
     t0 = jnp.asarray(t0).astype(dtype)
     if t0.ndim != 0:

@@ -5,6 +5,8 @@ Shape checks always run (shapes are static, even under ``jit``). Value checks
 tracers they are skipped, never wrong.
 """
 
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +15,7 @@ from ._state import RotState
 
 
 QUATERNION_NORM_TOL = 1e-6
+SUPPORTED_DTYPES = ("float32", "float64")
 
 
 def is_concrete(*xs) -> bool:
@@ -27,10 +30,42 @@ def float_dtype(*xs):
     return dtype
 
 
+def declared_dtype(x, name):
+    """The floating dtype that ``x`` declares, or None when it declares none.
+
+    Python numbers and lists, weakly typed scalars and integer or boolean arrays
+    declare none: they take the dtype of the other inputs. A complex array, or a
+    floating one other than float32 and float64 (float16, bfloat16, ...), is a
+    ``ValueError`` naming ``name``: it would otherwise fail later as a misleading
+    "not unit" quaternion (float16 rounds |q| by ~5e-4).
+    """
+    dtype = getattr(x, "dtype", None)
+    if dtype is None or getattr(x, "weak_type", False):
+        return None
+    dtype = np.dtype(dtype)
+    if jnp.issubdtype(dtype, jnp.complexfloating) or (
+        jnp.issubdtype(dtype, jnp.floating) and dtype.name not in SUPPORTED_DTYPES
+    ):
+        raise ValueError(
+            f"`{name}` has dtype {dtype.name}; jaxrot computes in float32 or float64 only, and "
+            "state.q and state.omega must share one of them (the inertia is cast to it). Cast it with "
+            ".astype(jnp.float32) or .astype(jnp.float64)."
+        )
+    return dtype if jnp.issubdtype(dtype, jnp.floating) else None
+
+
 def check_state(state, *, normalize=False, name="state") -> RotState:
     """Validate and convert a `RotState`; returns one with arrays of a common float dtype."""
     if not (isinstance(state, tuple) and len(state) == 2):
         raise ValueError(f"`{name}` must be jaxrot.RotState(q, omega); got {type(state).__name__}.")
+    q_dtype = declared_dtype(state[0], f"{name}.q")
+    omega_dtype = declared_dtype(state[1], f"{name}.omega")
+    if q_dtype is not None and omega_dtype is not None and q_dtype != omega_dtype:
+        raise ValueError(
+            f"`{name}.q` ({q_dtype.name}) and `{name}.omega` ({omega_dtype.name}) must have the same dtype, "
+            "float32 or float64 (the results keep it; the inertia is cast to it). Cast one of them, e.g. "
+            f"{name}.omega.astype({name}.q.dtype)."
+        )
     q, omega = (jnp.asarray(x) for x in state)
     if q.ndim < 1 or q.shape[-1] != 4:
         raise ValueError(f"`{name}.q` must have shape (..., 4) (scalar-first [w, x, y, z]); got {q.shape}.")
@@ -41,7 +76,8 @@ def check_state(state, *, normalize=False, name="state") -> RotState:
             f"`{name}.q` and `{name}.omega` must share their leading (particle) axes; "
             f"got {q.shape[:-1]} and {omega.shape[:-1]}."
         )
-    dtype = float_dtype(q, omega)
+    declared = q_dtype if q_dtype is not None else omega_dtype
+    dtype = declared if declared is not None else float_dtype(q, omega)
     q, omega = q.astype(dtype), omega.astype(dtype)
     if is_concrete(q, omega):
         for label, x in (("q", q), ("omega", omega)):
@@ -69,6 +105,7 @@ def check_inertia(inertia, batch_shape, dtype, name="inertia"):
     Returns ``(inertia, per_particle)``; the accepted shapes, in the order they
     are matched, are ``batch + (3, 3)``, ``(3, 3)``, ``batch + (3,)``, ``(3,)``.
     """
+    declared_dtype(inertia, name)
     inertia = jnp.asarray(inertia)
     batch_shape = tuple(batch_shape)
     shape = inertia.shape
@@ -192,6 +229,34 @@ def check_count(value, name, minimum):
     if value < minimum:
         raise ValueError(f"`{name}` must be >= {minimum}; got {value}.")
     return int(value)
+
+
+def _divisors(n: int) -> list[int]:
+    small = [d for d in range(1, math.isqrt(n) + 1) if n % d == 0]
+    return sorted({*small, *(n // d for d in small)})
+
+
+def check_save_every(save_every, n_steps: int) -> int:
+    """``save_every``, a Python int >= 1 that divides ``n_steps`` (so that the final state is saved).
+
+    Otherwise the run would end on a step that is not saved: ``n_steps=10,
+    save_every=3`` saved steps 0, 3, 6, 9 and silently dropped the final state.
+    The message names the divisors of ``n_steps`` nearest ``save_every`` and the
+    multiples of ``save_every`` nearest ``n_steps``.
+    """
+    save_every = check_count(save_every, "save_every", 1)
+    if n_steps % save_every:
+        divisors = _divisors(n_steps)
+        near = [max(d for d in divisors if d < save_every)]
+        near += [d for d in divisors if d > save_every][:1]
+        below = n_steps // save_every * save_every
+        steps = [m for m in (below, below + save_every) if m > 0]
+        raise ValueError(
+            f"`save_every` (= {save_every}) must divide `n_steps` (= {n_steps}), so that the last saved "
+            f"state is the final one. Use save_every={' or '.join(map(str, near))} (the divisors of "
+            f"{n_steps} nearest {save_every}), or n_steps={' or '.join(map(str, steps))}."
+        )
+    return save_every
 
 
 def check_torque(torque):

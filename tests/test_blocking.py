@@ -48,11 +48,11 @@ def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
     # Per-body args, per-particle inertia, a drive, the runtime check and the carry all blocked.
     state, _, dt, kwargs = driven_problem(dtype, n)
     inertia = jnp.broadcast_to(MOMENTS.astype(dtype), (n, 3)) * jnp.linspace(1, 2, n, dtype=dtype)[:, None]
-    call = dict(n_steps=7, save_every=2, **kwargs, return_carry=True, runtime_check=True)
+    call = dict(n_steps=8, save_every=2, **kwargs, return_carry=True, runtime_check=True)
     one = jaxrot.rollout(scheme, state, inertia, dt, **call)
     monkeypatch.setattr(_blocking, "BLOCK_BODIES", 4)
     run = _rollout.prepare_run(
-        scheme, state, inertia, dt, 7, kwargs["torque"], kwargs["args"], 2, 0.3, kwargs["drive"], False, False
+        scheme, state, inertia, dt, 8, kwargs["torque"], kwargs["args"], 2, 0.3, kwargs["drive"], False, False
     )
     assert run.n_blocks == _blocking.n_blocks_for(n, 4) > 1
     # The same arithmetic per body. The exception is "splitting", whose code compiled for a block

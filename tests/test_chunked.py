@@ -15,10 +15,10 @@ def problem(dtype):
     return driven_problem(dtype, N_BODIES)
 
 
-# float64: save_every = 2 and a step after the last save (not computed); float32: one step per save
-# and a shorter last chunk of a lone step (the case where XLA removes the loop, see `_rollout_flat`).
+# float64: save_every = 2, two saves a chunk; float32: one step per save and a shorter last chunk
+# of a lone step (the case where XLA removes the loop, see `_rollout_flat`).
 SETUPS = {
-    jnp.float64: ({"n_steps": 9, "save_every": 2}, 4, [3, 2], [4, 8]),
+    jnp.float64: ({"n_steps": 8, "save_every": 2}, 4, [3, 2], [4, 8]),
     jnp.float32: ({"n_steps": 5}, 2, [3, 2, 1], [2, 4, 5]),
 }
 
@@ -47,7 +47,7 @@ def test_chunks_concatenate_to_one_call_bit_for_bit(scheme, dtype):
 def test_save_load_resume_gives_the_one_call_result(tmp_path):
     # rozmanov carries the last torque and iteration counters: the carry, not the state, must resume.
     state, inertia, dt, kwargs = problem(jnp.float64)
-    setup = dict(n_steps=11, save_every=2)
+    setup = dict(n_steps=10, save_every=2)
     one, carry = jaxrot.rollout("rozmanov", state, inertia, dt, **setup, **kwargs, return_carry=True)
     chunks = jaxrot.rollout_chunks("rozmanov", state, inertia, dt, **setup, **kwargs, chunk_steps=4)
     first, checkpoint = next(chunks)
@@ -107,6 +107,8 @@ def test_bad_chunk_steps_and_a_damaged_checkpoint_are_rejected(tmp_path):
     for chunk_steps in (0, 3, 2.0):
         with pytest.raises(ValueError, match="`chunk_steps`"):
             small_run(chunk_steps=chunk_steps)
+    with pytest.raises(ValueError, match=r"`save_every` \(= 2\) must divide `n_steps` \(= 9\)"):
+        small_run(n_steps=9)  # at the call, before any chunk
     with pytest.raises(ValueError, match="multiple of `save_every`.*Use 2 or 4"):
         small_run(chunk_steps=3)
     with pytest.raises(ValueError, match="`chunk_steps`"):
@@ -123,11 +125,11 @@ def test_bad_chunk_steps_and_a_damaged_checkpoint_are_rejected(tmp_path):
 
 def test_progress_bar_draws_and_changes_nothing(capsys):
     state, inertia, dt, kwargs = problem(jnp.float64)
-    one = jaxrot.rollout("zhao", state, inertia, dt, 11, save_every=2, **kwargs)
+    one = jaxrot.rollout("zhao", state, inertia, dt, 10, save_every=2, **kwargs)
     capsys.readouterr()
-    with_bar = jaxrot.rollout("zhao", state, inertia, dt, 11, save_every=2, **kwargs, progress=True)
+    with_bar = jaxrot.rollout("zhao", state, inertia, dt, 10, save_every=2, **kwargs, progress=True)
     err = capsys.readouterr().err
-    assert "rollout zhao" in err and "10/10" in err  # counts steps run: 11 // 2 * 2
+    assert "rollout zhao" in err and "10/10" in err  # counts steps
     assert_same(with_bar, one)
     # The default is about 100 chunks of whole saves.
     from jaxrot._chunked import default_chunk_steps

@@ -20,7 +20,7 @@ def random_states(shape, seed=0):
     return jaxrot.RotState(q, jnp.asarray(rng.normal(size=(*shape, 3))))
 
 
-@pytest.mark.parametrize("n_steps, save_every", [(10, 1), (10, 3), (12, 4), (0, 1), (2, 5)])
+@pytest.mark.parametrize("n_steps, save_every", [(10, 1), (12, 3), (12, 4), (10, 10), (0, 1), (0, 5)])
 def test_saved_shapes_and_times(n_steps, save_every):
     traj = jaxrot.rollout("zhao", STATE, MOMENTS, 0.1, n_steps, save_every=save_every, t0=2.0)
     n_saved = n_steps // save_every + 1
@@ -28,6 +28,33 @@ def test_saved_shapes_and_times(n_steps, save_every):
     assert traj.q.shape == (n_saved, 4) and traj.omega.shape == (n_saved, 3)
     np.testing.assert_allclose(traj.t, 2.0 + 0.1 * save_every * np.arange(n_saved), atol=1e-14)
     np.testing.assert_array_equal(traj.q[0], STATE.q)
+    np.testing.assert_allclose(traj.t[-1], 2.0 + 0.1 * n_steps, atol=1e-14)  # the final state is saved
+
+
+@pytest.mark.parametrize(
+    "n_steps, save_every, fix",
+    [
+        (10, 3, r"save_every=2 or 5 \(the divisors of 10 nearest 3\), or n_steps=9 or 12"),
+        (7, 2, r"save_every=1 or 7 \(the divisors of 7 nearest 2\), or n_steps=6 or 8"),
+        (3, 5, r"save_every=3 \(the divisors of 3 nearest 5\), or n_steps=5\."),
+    ],
+)
+def test_save_every_that_does_not_divide_n_steps_is_rejected_before_compiling(n_steps, save_every, fix):
+    traced = []
+
+    def torque(t, q, omega, args):
+        traced.append(t)
+        return jnp.zeros(3)
+
+    message = rf"`save_every` \(= {save_every}\) must divide `n_steps` \(= {n_steps}\).*{fix}"
+    call = ("zhao", STATE, MOMENTS, 0.1, n_steps)
+    with pytest.raises(ValueError, match=message):
+        jaxrot.rollout(*call, torque=torque, save_every=save_every)
+    with pytest.raises(ValueError, match=message):
+        jaxrot.rollout(*call, torque=torque, save_every=save_every, chunk_steps=save_every)
+    with pytest.raises(ValueError, match=message):
+        jaxrot.rollout_chunks(*call, torque=torque, save_every=save_every, chunk_steps=save_every)
+    assert not traced
 
 
 def test_save_every_picks_the_same_states_as_saving_all():

@@ -419,7 +419,7 @@ def test_runtime_check_reports_the_first_nonfinite_step_eagerly():
             jnp.broadcast_to(Q0, (2, 2, 4)),
             jnp.stack([TUMBLING.omega, TUMBLING.omega, FAST.omega, TUMBLING.omega]).reshape(2, 2, 3),
         )
-        jaxrot.rollout("zhao", batch, MOMENTS, 1e-3, 20, save_every=7, runtime_check=True)
+        jaxrot.rollout("zhao", batch, MOMENTS, 1e-3, 21, save_every=7, runtime_check=True)
 
 
 def test_runtime_check_works_under_jit_and_vmap():

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, principal_state
+from helpers import MOMENTS, principal_state, scheme_params
 
 import jaxrot
 
@@ -53,6 +53,10 @@ BAD_INPUTS = {
     "n_steps negative": (dict(n_steps=-1), r"n_steps.*>= 0"),
     "n_steps float": (dict(n_steps=2.5), r"n_steps.*Python int"),
     "save_every zero": (dict(save_every=0), r"save_every.*>= 1"),
+    "save_every does not divide n_steps": (
+        dict(n_steps=10, save_every=4),
+        r"save_every.*must divide `n_steps`",
+    ),
     "unknown scheme": (dict(scheme="rk4"), r"scheme.*'zhao'"),
     "torque not callable": (dict(torque=jnp.zeros(3)), r"torque.*callable"),
     "t0 not scalar": (dict(t0=jnp.zeros(2)), r"t0.*scalar"),
@@ -73,7 +77,45 @@ def test_reference_rollout_checks_state_and_inertia_the_same_way(kwargs, match):
         )
 
 
-@pytest.mark.parametrize("scheme", list(jaxrot.SCHEMES))
+# Not "must be unit quaternions" (float16 rounds |q| by ~5e-4): the dtype, named, and what to do.
+BAD_DTYPES = {
+    "q float16": (
+        dict(state=jaxrot.RotState(Q.astype(jnp.float16), OMEGA.astype(jnp.float16))),
+        r"`state\.q` has dtype float16; jaxrot computes in float32 or float64 only.*\.astype",
+    ),
+    "omega bfloat16": (
+        dict(state=jaxrot.RotState(Q, OMEGA.astype(jnp.bfloat16))),
+        r"`state\.omega` has dtype bfloat16; jaxrot computes in float32 or float64",
+    ),
+    "q complex": (
+        dict(state=jaxrot.RotState(Q.astype(jnp.complex64), OMEGA)),
+        r"`state\.q` has dtype complex64",
+    ),
+    "q and omega differ": (
+        dict(state=jaxrot.RotState(Q.astype(jnp.float32), OMEGA)),
+        r"`state\.q` \(float32\) and `state\.omega` \(float64\) must have the same dtype, float32 or float64",
+    ),
+    "inertia float16": (dict(inertia=MOMENTS.astype(jnp.float16)), r"`inertia` has dtype float16"),
+}
+
+
+@pytest.mark.parametrize("kwargs, match", BAD_DTYPES.values(), ids=BAD_DTYPES.keys())
+def test_unsupported_or_mixed_dtypes_are_named(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        run(**kwargs)
+    with pytest.raises(ValueError, match=match):
+        jaxrot.reference_rollout(
+            kwargs.get("state", GOOD), kwargs.get("inertia", MOMENTS), jnp.array([0.0, 0.1])
+        )
+
+
+def test_untyped_inputs_and_the_inertia_take_the_state_dtype():
+    """Python lists (and a float64 inertia) follow a float32 state: nothing to match there."""
+    traj = run(state=jaxrot.RotState(Q.astype(jnp.float32), OMEGA.tolist()), inertia=MOMENTS)
+    assert traj.q.dtype == traj.omega.dtype == traj.t.dtype == jnp.float32
+
+
+@pytest.mark.parametrize("scheme", scheme_params())
 def test_torque_of_wrong_shape_is_reported(scheme):
     with pytest.raises(ValueError, match=r"torque.*shape \(3,\)"):
         run(scheme=scheme, torque=lambda t, q, omega, args: jnp.zeros(2))
