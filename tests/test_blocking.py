@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, assert_same, driven_problem
+from helpers import MOMENTS, assert_same, driven_problem, scheme_params
 
 import jaxrot
 from jaxrot import _blocking, _rollout, quaternion as quat
@@ -42,7 +42,7 @@ def test_blocks_round_trip_with_a_strided_split(n):
 
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-@pytest.mark.parametrize("scheme", sorted(jaxrot.SCHEMES))
+@pytest.mark.parametrize("scheme", scheme_params(sorted(jaxrot.SCHEMES)))
 @pytest.mark.parametrize("n", [12, 13])
 def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
     # Per-body args, per-particle inertia, a drive, the runtime check and the carry all blocked.

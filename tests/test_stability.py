@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import scheme_params
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat, stability
@@ -55,7 +56,7 @@ LADDER = np.logspace(-12, 1, 39)
 
 @pytest.mark.parametrize("body", list(BODIES))
 @pytest.mark.parametrize("dtype", list(DTYPES))
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     """No NaN and |q| = 1 over the ladder (up to where zhao is documented to blow up); the limit.
 
@@ -131,7 +132,7 @@ def extreme_setup():
     return state, moments, exact
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_extreme_inertia_and_rest_are_finite_and_accurate(name):
     """Needle (ratio 1e6), flat disc, symmetric, spherical, tiny/huge units; ω = 0 and tumbling.
 
@@ -153,7 +154,7 @@ def test_extreme_inertia_and_rest_are_finite_and_accurate(name):
     np.testing.assert_allclose(traj.q[:, n:], jnp.broadcast_to(Q0, traj.q[:, n:].shape), atol=1e-15)
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_gradients_through_1e4_steps_at_extreme_bodies_and_rest(name):
     """jax.grad through 10^4 steps (t = 5) w.r.t. ω₀ (also at ω₀ = 0) and the moments (also of
     exactly symmetric and spherical bodies), with a torque: finite, and the ω₀ directional
@@ -326,7 +327,7 @@ DZ_PERIOD = {
 }  # [2.8e-6, 3.9e-6, 5.8e-7, 7e-10]
 
 
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_intermediate_axis_flip(name):
     """Agreement with the exact motion while comparison is meaningful, and the flip period.
 
@@ -381,7 +382,7 @@ LONG_RUN = {
 
 
 @pytest.mark.parametrize("dtype", list(DTYPES))
-@pytest.mark.parametrize("name", SCHEME_NAMES)
+@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_long_run_drift(name, dtype):
     """Every step is also checked by runtime_check=True: no false alarm over 10^6 steps."""
     n_steps = 1_000_000 if dtype == "float32" and name != "splitting" else 100_000
