@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     cmp.add_argument(
         "--solvers",
         default=None,
-        help="comma-separated subset of diffrax_tsit5,diffrax_dopri5,diffrax_dopri8, or 'none' (default: all)",
+        help="subset of diffrax_tsit5,diffrax_dopri5,diffrax_dopri8, or none (default: all)",
     )
     cmp.add_argument(
         "--tolerances",

@@ -20,8 +20,9 @@ from jax.extend import core as jex_core
 
 from .. import quaternion as quat
 from .._inertia import body_inertia
+from .._rotor import free_rotor
 from .._state import RotState
-from ..analytic import free_motion, principal_axes
+from ..analytic import principal_axes
 from ._base import AbstractScheme, world_torque
 from .splitting import SplittingCarry, _kick
 
@@ -132,7 +133,7 @@ class AbstractRKNSplitting(AbstractScheme):
         kicks, rotors = np.asarray(self.kick_weights), np.asarray(self.rotor_weights)
 
         def rotor(q_p, omega, weight):
-            return free_motion(q_p, omega, moments, weight * dt)
+            return free_rotor(q_p, omega, moments, weight * dt)
 
         def kick(q_p, omega, weight, elapsed):
             tau = world_torque(torque, t + elapsed * dt, quat.multiply(q_p, to_body), omega, args)
