@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._particles import unflatten_trajectory
-from ._rollout import Run, prepare_run
+from ._run import Run, prepare_run
 from ._state import RotState, Trajectory
 from ._validation import check_count, is_concrete
 

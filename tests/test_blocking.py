@@ -7,7 +7,7 @@ import pytest
 from helpers import MOMENTS, assert_same, driven_problem, scheme_params
 
 import jaxrot
-from jaxrot import _blocking, _rollout, quaternion as quat
+from jaxrot import _blocking, _run, quaternion as quat
 
 
 @pytest.fixture
@@ -51,7 +51,7 @@ def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
     call = dict(n_steps=8, save_every=2, **kwargs, return_carry=True, runtime_check=True)
     one = jaxrot.rollout(scheme, state, inertia, dt, **call)
     monkeypatch.setattr(_blocking, "BLOCK_BODIES", 4)
-    run = _rollout.prepare_run(
+    run = _run.prepare_run(
         scheme, state, inertia, dt, 8, kwargs["torque"], kwargs["args"], 2, 0.3, kwargs["drive"], False, False
     )
     assert run.n_blocks == _blocking.n_blocks_for(n, 4) > 1
@@ -81,7 +81,7 @@ def test_coupled_bodies_are_not_blocked(tiny_blocks):
     scene = jaxrot.SCENES["dipole_cloud"](jnp.float64)
     n = scene.state.q.shape[0]
     assert _blocking.n_blocks_for(n) > 1
-    run = _rollout.prepare_run(
+    run = _run.prepare_run(
         "zhao", scene.state, scene.inertia, scene.dt, 3, scene.torque, scene.args, 1, 0.0, None, False, False
     )
     assert run.n_blocks == 1

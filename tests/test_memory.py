@@ -8,7 +8,7 @@ import pytest
 from helpers import scheme_params
 
 import jaxrot
-from jaxrot import _blocking, _rollout
+from jaxrot import _blocking, _run
 
 
 def compiled_memory(scheme, n_bodies, n_steps, save_every):
@@ -51,7 +51,7 @@ def test_the_compiled_core_keeps_the_final_carry_only_when_asked(scheme, runtime
     n = 64
     q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
     state = jaxrot.RotState(q, jnp.ones((n, 3)))
-    run = _rollout.prepare_run(
+    run = _run.prepare_run(
         scheme, state, jnp.array([1.0, 2.0, 3.0]), 1e-3, 20, None, None, 10, 0.0, None, True, runtime_check
     )
 
