@@ -1,0 +1,138 @@
+"""mkdocs hook: the measured tables of the docs, rendered from the data files under docs/.
+
+A page writes ``{{ throughput_table }}``, ``{{ compile_table }}``, ``{{ memory_table }}`` or
+``{{ compare_table }}`` on a line of its own; the hook replaces it with a Markdown table built
+from ``docs/throughput_cpu.json``, ``docs/memory_cpu.json`` or ``docs/compare_heavy_top.csv``,
+so the pages show exactly what the benchmarks wrote.
+"""
+
+import csv
+import json
+from pathlib import Path
+
+
+def _table(header, rows):
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _sig(x, digits=3):
+    return f"{x:.{digits}g}"
+
+
+def _power_of_ten(n):
+    exponent = len(str(n)) - 1
+    superscript = str(exponent).translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return f"10{superscript}" if n == 10**exponent else str(n)
+
+
+def _pivot(docs, field, scale, digits):
+    data = json.loads((docs / "throughput_cpu.json").read_text())
+    methods = list(dict.fromkeys(row["method"] for row in data["rows"]))
+    cases = list(dict.fromkeys((row["dtype"], row["n"]) for row in data["rows"]))
+    values = {(row["dtype"], row["n"], row["method"]): row[field] for row in data["rows"]}
+    rows = [
+        [dtype, _power_of_ten(n)]
+        + [_sig(values[dtype, n, m] * scale, digits) if (dtype, n, m) in values else "–" for m in methods]
+        for dtype, n in cases
+    ]
+    header = ["dtype", "N"] + [f"`{m}`" if m != "jax_md" else "jax_md (NO_SQUISH)" for m in methods]
+    machine = data["machine"]
+    note = (
+        f"\n\n*From `docs/throughput_cpu.json`: {machine['cpus']} CPU cores, Python {machine['python']}, "
+        f"jax {machine['jax']}, jax_md {machine.get('jax_md', '–')}.*"
+    )
+    return _table(header, rows) + note
+
+
+def throughput_table(docs):
+    return _pivot(docs, "particle_steps_per_s", 1e-6, 3)
+
+
+def compile_table(docs):
+    return _pivot(docs, "compile_s", 1.0, 2)
+
+
+def memory_table(docs):
+    data = json.loads((docs / "memory_cpu.json").read_text())
+    header = [
+        "scheme",
+        "save every",
+        "chunk steps",
+        "saved states",
+        "peak RSS [MiB]",
+        "peak before the run [MiB]",
+        "XLA output [MiB]",
+        "XLA temp [MiB]",
+        "wall time [s]",
+    ]
+    rows = [
+        [
+            f"`{r['scheme']}`",
+            r["save_every"],
+            r["chunk_steps"] or "–",
+            r["saved_states"],
+            f"{r['peak_rss_mib']:.0f}",
+            f"{r['rss_before_mib']:.0f}",
+            f"{r['xla_output_mib']:.0f}",
+            f"{r['xla_temp_mib']:.0f}",
+            f"{r['seconds']:.0f}",
+        ]
+        for r in data
+    ]
+    return _table(header, rows)
+
+
+def compare_table(docs):
+    with (docs / "compare_heavy_top.csv").open(newline="") as f:
+        data = list(csv.DictReader(f))
+    header = [
+        "method",
+        "setting",
+        "max q error [rad]",
+        "final ω error",
+        "rel. energy drift",
+        "torque calls",
+        "µs per particle-step",
+        "µs per particle",
+    ]
+    rows = [
+        [
+            f"`{r['method']}`",
+            f"dt = {float(r['dt']):.4g}" if r["kind"] == "fixed" else f"tol = {float(r['tol']):.0e}",
+            f"{float(r['max_orientation_error_rad']):.1e}",
+            f"{float(r['final_omega_error']):.1e}",
+            f"{float(r['rel_energy_drift']):.1e}",
+            r["torque_evals"],
+            _sig(float(r["us_per_particle_step"]), 2),
+            _sig(float(r["us_per_particle_run"]), 3),
+        ]
+        for r in data
+    ]
+    return _table(header, rows)
+
+
+TABLES = {
+    "throughput_table": throughput_table,
+    "compile_table": compile_table,
+    "memory_table": memory_table,
+    "compare_table": compare_table,
+}
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Replace each ``{{ name }}`` line naming a table in `TABLES` by that table."""
+    docs = Path(config["docs_dir"])
+    lines = markdown.split("\n")
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped.startswith("{{") and stripped.endswith("}}"):
+            name = stripped[2:-2].strip()
+            if name not in TABLES:
+                raise KeyError(
+                    f"{page.file.src_path}: unknown table {{{{ {name} }}}}; known: {sorted(TABLES)}"
+                )
+            indent = line[: len(line) - len(line.lstrip())]
+            lines[i] = "\n".join(indent + row for row in TABLES[name](docs).split("\n"))
+    return "\n".join(lines)
