@@ -20,9 +20,9 @@ from jax.extend import core as jex_core
 
 from .. import quaternion as quat
 from .._inertia import body_inertia
+from .._principal_axes import principal_axes
 from .._rotor import free_rotor
 from .._state import RotState
-from ..analytic import principal_axes
 from ._base import AbstractScheme, world_torque
 from .splitting import SplittingCarry, _kick
 

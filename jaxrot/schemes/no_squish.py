@@ -8,9 +8,9 @@ import jax.numpy as jnp
 from .. import quaternion as quat
 from .._fusion import stage
 from .._inertia import BodyInertia, body_inertia
+from .._principal_axes import principal_axes
 from .._state import RotState
 from .._trig import sincos
-from ..analytic import principal_axes
 from ._base import AbstractScheme, world_torque
 
 

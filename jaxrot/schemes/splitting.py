@@ -5,9 +5,10 @@ from typing import Any, ClassVar, NamedTuple
 import jax
 
 from .. import quaternion as quat
+from .._free_motion import free_motion
 from .._inertia import body_inertia
+from .._principal_axes import principal_axes
 from .._state import RotState
-from ..analytic import free_motion, principal_axes
 from ._base import AbstractScheme, world_torque
 
 
