@@ -117,7 +117,7 @@ def test_gradients_of_the_fit_parameters_match_central_differences():
     params = _fit._Params(
         jnp.asarray(_fit.cholesky_from_inertia(TENSOR * 1.02)),
         jnp.full((1, 3), 0.01),
-        jnp.asarray(extra["omega_estimate"][:1]),
+        jnp.asarray(extra.omega_estimate[:1]),
     )
     value_and_grad = _fit._value_and_grad(params, problem)
     objective = jax.jit(_fit._objective)
@@ -217,7 +217,7 @@ def perfect_observations(dtype):
 def round_off_floor(obs, **options):
     """`fit_inertia`'s round-off floor of the objective for torque-free ``obs``."""
     problem, extra = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
-    return _fit._round_off_floor(problem, float(np.max(np.linalg.norm(extra["omega_estimate"], axis=-1))))
+    return _fit._round_off_floor(problem, float(np.max(np.linalg.norm(extra.omega_estimate, axis=-1))))
 
 
 def ratio_sensitivity(obs, **options):

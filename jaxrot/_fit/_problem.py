@@ -1,0 +1,214 @@
+"""The fit's set-up: checked observations, cut into padded segments, and the model's configuration."""
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._validation import QUATERNION_NORM_TOL, check_torque, is_concrete
+from ..schemes import resolve_scheme
+from ._initial import estimate_omega
+
+
+# The default time step turns the body by at most this angle (radians) per step.
+DEFAULT_STEP_ANGLE = 0.01
+
+
+class _Segments(NamedTuple):
+    """Observations cut into ``K`` segments, each padded to ``P`` intervals (+ chunk padding)."""
+
+    t: jax.Array  # (K, P + 1)      padded by repeating the last time: dt = 0 steps are no-ops
+    q: jax.Array  # (K, P + 1, 4)
+    omega: jax.Array | None  # (K, P + 1, 3)
+    weight: jax.Array  # (K, P + 1)  1 for an observation counted here, 0 otherwise
+    q_start: jax.Array  # (K, 4) observed orientation at each segment start
+
+
+class _Problem(eqx.Module):
+    """What the objective needs: the segmented data and the static configuration of the model."""
+
+    data: _Segments
+    args: object
+    scheme: object = eqx.field(static=True)
+    torque: object = eqx.field(static=True)
+    substeps: int = eqx.field(static=True)
+    n_outer: int = eqx.field(static=True)
+    n_inner: int = eqx.field(static=True)
+    checkpoint: bool = eqx.field(static=True)
+    unit_trace: bool = eqx.field(static=True)
+    omega_weight: float = eqx.field(static=True)
+    continuity_weight: float = eqx.field(static=True)
+    spacing: float = eqx.field(static=True)  # mean observation interval: scales ω mismatches to rad
+
+
+class _Observations(NamedTuple):
+    """The checked observations (float64 NumPy arrays) and what the set-up derived from them."""
+
+    t: np.ndarray  # (n,)
+    q: np.ndarray  # (n, 4) unit, sign-continuous
+    omega: np.ndarray | None  # (n, 3) world frame, if observed
+    omega_estimate: np.ndarray  # (n, 3) the observed omega, or estimated from q (`estimate_omega`)
+    bounds: np.ndarray  # (K + 1,) observation index of each segment's start, and of the last one
+    dtype: np.dtype  # the float dtype the fit runs in
+
+
+def _check_observed(observed, normalize):
+    if not (isinstance(observed, tuple) and len(observed) == 3):
+        raise ValueError(
+            "`observed` must be a jaxrot.Trajectory(t, q, omega) with omega an (n, 3) array or None; "
+            f"got {type(observed).__name__}."
+        )
+    t, q, omega = observed
+    if not is_concrete(t, q, omega):
+        raise ValueError(
+            "`observed` must hold concrete arrays: fit_inertia runs its optimiser eagerly (not under jit)."
+        )
+    t, q = np.asarray(t), np.asarray(q)
+    if t.ndim != 1 or t.shape[0] < 3:
+        raise ValueError(f"`observed.t` must be a 1-D array of at least 3 times; got shape {t.shape}.")
+    n = t.shape[0]
+    if q.shape != (n, 4):
+        raise ValueError(
+            f"`observed.q` must have shape (n, 4) = ({n}, 4) for one body (scalar-first quaternions at "
+            f"the times observed.t); got {q.shape}. Fit several bodies one at a time."
+        )
+    if omega is not None:
+        omega = np.asarray(omega)
+        if omega.shape != (n, 3):
+            raise ValueError(
+                f"`observed.omega` must be None or world-frame angular velocities of shape ({n}, 3); "
+                f"got {omega.shape}."
+            )
+    for label, x in (("t", t), ("q", q), ("omega", omega)):
+        if x is not None and not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"`observed.{label}` contains NaN or infinite values; drop those samples (or pass "
+                "omega=None when angular velocities were not measured)."
+            )
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("`observed.t` must be strictly increasing.")
+    norms = np.linalg.norm(q, axis=-1)
+    if np.any(norms == 0):
+        raise ValueError("`observed.q` contains a zero quaternion, which is not a rotation.")
+    worst = float(np.max(np.abs(norms - 1)))
+    if not normalize and worst > QUATERNION_NORM_TOL:
+        raise ValueError(
+            f"`observed.q` must be unit quaternions (| |q| - 1 | <= {QUATERNION_NORM_TOL:g}); the worst is "
+            f"off by {worst:.3g}. Normalise them or pass normalize=True."
+        )
+    dtype = jnp.result_type(*(x for x in (t, q, omega) if x is not None))
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    q = q / norms[:, None]
+    # Make consecutive quaternions sign-continuous (q and -q are the same rotation).
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    signs = np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))
+    q = q * signs[:, None]
+    return (
+        t.astype(np.float64),
+        q.astype(np.float64),
+        None if omega is None else omega.astype(np.float64),
+        dtype,
+    )
+
+
+def _positive_int(value, name, minimum=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"`{name}` must be a Python int >= {minimum}; got {value!r}.")
+    return int(value)
+
+
+def _build_problem(
+    observed,
+    *,
+    torque,
+    args,
+    segments,
+    unit_trace,
+    scheme="zhao",
+    dt=None,
+    substeps=None,
+    checkpoint=True,
+    checkpoint_every=None,
+    omega_weight=1.0,
+    continuity_weight=100.0,
+    omega_estimate=None,
+    normalize=False,
+):
+    """The `_Problem` (validated, padded data and the static configuration) and the `_Observations`."""
+    scheme = resolve_scheme(scheme)
+    check_torque(torque)
+    t, q, omega, dtype = _check_observed(observed, normalize)
+    n = t.shape[0]
+    segments = _positive_int(segments, "segments")
+    if segments > n - 1:
+        raise ValueError(
+            f"`segments` must be <= the number of observation intervals ({n - 1}); got {segments}."
+        )
+    if omega_estimate is None:
+        omega_estimate = omega if omega is not None else estimate_omega(t, q)
+    spacing = float(np.max(np.diff(t)))
+    if substeps is not None:
+        if dt is not None:
+            raise ValueError("Pass `dt` or `substeps`, not both.")
+        substeps = _positive_int(substeps, "substeps")
+    else:
+        if dt is None:
+            w_max = float(np.max(np.linalg.norm(omega_estimate, axis=-1)))
+            dt = DEFAULT_STEP_ANGLE / w_max if w_max > 0 else spacing
+        dt = float(dt)
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"`dt` must be a finite time step > 0; got {dt}.")
+        substeps = max(1, math.ceil(spacing / dt * (1 - 1e-12)))
+
+    bounds = np.round(np.linspace(0, n - 1, segments + 1)).astype(int)
+    n_intervals = int(np.max(np.diff(bounds)))
+    n_steps = n_intervals * substeps
+    if checkpoint:
+        n_inner = (
+            _positive_int(checkpoint_every, "checkpoint_every")
+            if checkpoint_every is not None
+            else max(1, math.ceil(math.sqrt(n_steps)))
+        )
+        n_outer = math.ceil(n_steps / n_inner)
+    else:
+        n_inner, n_outer = 1, n_steps
+    length = math.ceil(n_outer * n_inner / substeps) + 1  # padded observation slots per segment
+
+    ts, qs, ws, weights = [], [], [], []
+    for s in range(segments):
+        lo, hi = bounds[s], bounds[s + 1]
+        idx = np.minimum(np.arange(lo, lo + length), hi)
+        weight = (np.arange(lo, lo + length) <= hi).astype(np.float64)
+        if s < segments - 1:
+            weight[hi - lo] = 0.0  # the boundary sample is counted by the next segment
+        ts.append(t[idx])
+        qs.append(q[idx])
+        weights.append(weight)
+        if omega is not None:
+            ws.append(omega[idx])
+    data = _Segments(
+        t=jnp.asarray(np.stack(ts), dtype),
+        q=jnp.asarray(np.stack(qs), dtype),
+        omega=None if omega is None else jnp.asarray(np.stack(ws), dtype),
+        weight=jnp.asarray(np.stack(weights), dtype),
+        q_start=jnp.asarray(q[bounds[:-1]], dtype),
+    )
+    problem = _Problem(
+        data=data,
+        args=args,
+        scheme=scheme,
+        torque=torque,
+        substeps=substeps,
+        n_outer=n_outer,
+        n_inner=n_inner,
+        checkpoint=bool(checkpoint),
+        unit_trace=unit_trace,
+        omega_weight=float(omega_weight),
+        continuity_weight=float(continuity_weight),
+        spacing=float((t[-1] - t[0]) / (n - 1)),
+    )
+    return problem, _Observations(t, q, omega, omega_estimate, bounds, dtype)
