@@ -3,6 +3,10 @@
 Shape checks always run (shapes are static, even under ``jit``). Value checks
 (finite, unit norm, positive definite, …) run only on concrete arrays; on
 tracers they are skipped, never wrong.
+
+`jaxrot.fit_inertia`'s checks (`check_observed`, `check_int`, `check_weight`,
+`check_finite_array`) live here too; they reject traced inputs instead, as the fit
+runs its optimiser eagerly.
 """
 
 import math
@@ -265,3 +269,91 @@ def check_torque(torque):
             "`torque` must be None (torque-free) or a callable torque(t, q, omega, args) -> (3,) "
             f"world-frame torque; got {type(torque).__name__}."
         )
+
+
+def check_observed(observed, normalize):
+    """`jaxrot.fit_inertia`'s observations as ``(t, q, omega, dtype)``: float64 NumPy arrays, the fit's dtype.
+
+    ``observed`` must be a concrete `Trajectory` of one body (the fit runs its
+    optimiser eagerly): ``t`` ``(n,)`` finite and strictly increasing, ``n >= 3``;
+    ``q`` ``(n, 4)`` finite unit quaternions (normalised with ``normalize``), made
+    sign-continuous; ``omega`` ``(n, 3)`` finite, or None.
+    """
+    if not (isinstance(observed, tuple) and len(observed) == 3):
+        raise ValueError(
+            "`observed` must be a jaxrot.Trajectory(t, q, omega) with omega an (n, 3) array or None; "
+            f"got {type(observed).__name__}."
+        )
+    t, q, omega = observed
+    if not is_concrete(t, q, omega):
+        raise ValueError(
+            "`observed` must hold concrete arrays: fit_inertia runs its optimiser eagerly (not under jit)."
+        )
+    t, q = np.asarray(t), np.asarray(q)
+    if t.ndim != 1 or t.shape[0] < 3:
+        raise ValueError(f"`observed.t` must be a 1-D array of at least 3 times; got shape {t.shape}.")
+    n = t.shape[0]
+    if q.shape != (n, 4):
+        raise ValueError(
+            f"`observed.q` must have shape (n, 4) = ({n}, 4) for one body (scalar-first quaternions at "
+            f"the times observed.t); got {q.shape}. Fit several bodies one at a time."
+        )
+    if omega is not None:
+        omega = np.asarray(omega)
+        if omega.shape != (n, 3):
+            raise ValueError(
+                f"`observed.omega` must be None or world-frame angular velocities of shape ({n}, 3); "
+                f"got {omega.shape}."
+            )
+    for label, x in (("t", t), ("q", q), ("omega", omega)):
+        if x is not None and not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"`observed.{label}` contains NaN or infinite values; drop those samples (or pass "
+                "omega=None when angular velocities were not measured)."
+            )
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("`observed.t` must be strictly increasing.")
+    norms = np.linalg.norm(q, axis=-1)
+    if np.any(norms == 0):
+        raise ValueError("`observed.q` contains a zero quaternion, which is not a rotation.")
+    worst = float(np.max(np.abs(norms - 1)))
+    if not normalize and worst > QUATERNION_NORM_TOL:
+        raise ValueError(
+            f"`observed.q` must be unit quaternions (| |q| - 1 | <= {QUATERNION_NORM_TOL:g}); the worst is "
+            f"off by {worst:.3g}. Normalise them or pass normalize=True."
+        )
+    dtype = jnp.result_type(*(x for x in (t, q, omega) if x is not None))
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    q = q / norms[:, None]
+    # Make consecutive quaternions sign-continuous (q and -q are the same rotation).
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    signs = np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))
+    q = q * signs[:, None]
+    return (
+        t.astype(np.float64),
+        q.astype(np.float64),
+        None if omega is None else omega.astype(np.float64),
+        dtype,
+    )
+
+
+def check_int(value, name, minimum=1):
+    """An option that must be a Python int >= ``minimum`` (a bool is not one)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"`{name}` must be a Python int >= {minimum}; got {value!r}.")
+    return int(value)
+
+
+def check_weight(value, name):
+    """An objective weight: a finite number >= 0."""
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"`{name}` must be a finite number >= 0; got {value}.")
+
+
+def check_finite_array(x, name, shape, what) -> np.ndarray:
+    """``x`` as a float64 NumPy array, which must have ``shape`` and finite values (``what`` names it)."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.shape != shape or not np.all(np.isfinite(x)):
+        raise ValueError(f"`{name}` must be a finite {what}; got shape {x.shape}.")
+    return x

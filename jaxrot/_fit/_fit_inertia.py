@@ -8,11 +8,12 @@ import numpy as np
 
 from .. import quaternion as quat
 from .._state import Trajectory
+from .._validation import check_int, check_weight
 from ._initial import _start_params
 from ._objective import _residuals, _unpack
 from ._optimiser import _optimise, _round_off_floor
 from ._parameterisation import inertia_from_cholesky
-from ._problem import _build_problem, _positive_int
+from ._problem import _build_problem
 
 
 class FitResult(NamedTuple):
@@ -192,10 +193,9 @@ def fit_inertia(
         [1.0, 1.5, 2.0] True
     """
     for name, value in (("continuity_weight", continuity_weight), ("omega_weight", omega_weight)):
-        if not (np.isfinite(value) and value >= 0):
-            raise ValueError(f"`{name}` must be a finite number >= 0; got {value}.")
-    adam_steps = _positive_int(adam_steps, "adam_steps", 0)
-    max_iter = _positive_int(max_iter, "max_iter", 0)
+        check_weight(value, name)
+    adam_steps = check_int(adam_steps, "adam_steps", 0)
+    max_iter = check_int(max_iter, "max_iter", 0)
     unit_trace = torque is None
     problem, observations = _build_problem(
         observed,

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._validation import check_finite_array
 from ._parameterisation import _Params, cholesky_from_inertia, inertia_from_cholesky
 
 
@@ -106,9 +107,7 @@ def _start_params(observations, *, torque, args, unit_trace, segments, inertia0,
     if inertia0 is None:
         start, momentum = _linear_estimate(observations.t, observations.q, omega_est, torque, args, dtype)
     else:
-        start = np.asarray(inertia0, dtype=np.float64)
-        if start.shape != (3, 3) or not np.all(np.isfinite(start)):
-            raise ValueError(f"`inertia0` must be a finite (3, 3) tensor; got shape {start.shape}.")
+        start = check_finite_array(inertia0, "inertia0", (3, 3), "(3, 3) tensor")
     chol = cholesky_from_inertia(start)
     if unit_trace:
         # Only the shape of S is determined: L₀₀ stays at its start value (it is not a fit parameter).
@@ -122,9 +121,7 @@ def _start_params(observations, *, torque, args, unit_trace, segments, inertia0,
         if np.all(np.isfinite(candidate)):
             start_omega[0] = candidate
     if omega0 is not None:
-        omega0 = np.asarray(omega0, dtype=np.float64)
-        if omega0.shape != (3,) or not np.all(np.isfinite(omega0)):
-            raise ValueError(f"`omega0` must be a finite world-frame (3,) vector; got shape {omega0.shape}.")
+        omega0 = check_finite_array(omega0, "omega0", (3,), "world-frame (3,) vector")
         start_omega[0] = omega0
     return _Params(
         chol=jnp.asarray(chol, dtype),

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validation import QUATERNION_NORM_TOL, check_torque, is_concrete
+from .._validation import check_int, check_observed, check_torque
 from ..schemes import resolve_scheme
 from ._initial import estimate_omega
 
@@ -55,72 +55,6 @@ class _Observations(NamedTuple):
     dtype: np.dtype  # the float dtype the fit runs in
 
 
-def _check_observed(observed, normalize):
-    if not (isinstance(observed, tuple) and len(observed) == 3):
-        raise ValueError(
-            "`observed` must be a jaxrot.Trajectory(t, q, omega) with omega an (n, 3) array or None; "
-            f"got {type(observed).__name__}."
-        )
-    t, q, omega = observed
-    if not is_concrete(t, q, omega):
-        raise ValueError(
-            "`observed` must hold concrete arrays: fit_inertia runs its optimiser eagerly (not under jit)."
-        )
-    t, q = np.asarray(t), np.asarray(q)
-    if t.ndim != 1 or t.shape[0] < 3:
-        raise ValueError(f"`observed.t` must be a 1-D array of at least 3 times; got shape {t.shape}.")
-    n = t.shape[0]
-    if q.shape != (n, 4):
-        raise ValueError(
-            f"`observed.q` must have shape (n, 4) = ({n}, 4) for one body (scalar-first quaternions at "
-            f"the times observed.t); got {q.shape}. Fit several bodies one at a time."
-        )
-    if omega is not None:
-        omega = np.asarray(omega)
-        if omega.shape != (n, 3):
-            raise ValueError(
-                f"`observed.omega` must be None or world-frame angular velocities of shape ({n}, 3); "
-                f"got {omega.shape}."
-            )
-    for label, x in (("t", t), ("q", q), ("omega", omega)):
-        if x is not None and not np.all(np.isfinite(x)):
-            raise ValueError(
-                f"`observed.{label}` contains NaN or infinite values; drop those samples (or pass "
-                "omega=None when angular velocities were not measured)."
-            )
-    if np.any(np.diff(t) <= 0):
-        raise ValueError("`observed.t` must be strictly increasing.")
-    norms = np.linalg.norm(q, axis=-1)
-    if np.any(norms == 0):
-        raise ValueError("`observed.q` contains a zero quaternion, which is not a rotation.")
-    worst = float(np.max(np.abs(norms - 1)))
-    if not normalize and worst > QUATERNION_NORM_TOL:
-        raise ValueError(
-            f"`observed.q` must be unit quaternions (| |q| - 1 | <= {QUATERNION_NORM_TOL:g}); the worst is "
-            f"off by {worst:.3g}. Normalise them or pass normalize=True."
-        )
-    dtype = jnp.result_type(*(x for x in (t, q, omega) if x is not None))
-    if not jnp.issubdtype(dtype, jnp.floating):
-        dtype = jnp.result_type(float)
-    q = q / norms[:, None]
-    # Make consecutive quaternions sign-continuous (q and -q are the same rotation).
-    dots = np.sum(q[1:] * q[:-1], axis=-1)
-    signs = np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))
-    q = q * signs[:, None]
-    return (
-        t.astype(np.float64),
-        q.astype(np.float64),
-        None if omega is None else omega.astype(np.float64),
-        dtype,
-    )
-
-
-def _positive_int(value, name, minimum=1):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"`{name}` must be a Python int >= {minimum}; got {value!r}.")
-    return int(value)
-
-
 def _build_problem(
     observed,
     *,
@@ -141,9 +75,9 @@ def _build_problem(
     """The `_Problem` (validated, padded data and the static configuration) and the `_Observations`."""
     scheme = resolve_scheme(scheme)
     check_torque(torque)
-    t, q, omega, dtype = _check_observed(observed, normalize)
+    t, q, omega, dtype = check_observed(observed, normalize)
     n = t.shape[0]
-    segments = _positive_int(segments, "segments")
+    segments = check_int(segments, "segments")
     if segments > n - 1:
         raise ValueError(
             f"`segments` must be <= the number of observation intervals ({n - 1}); got {segments}."
@@ -154,7 +88,7 @@ def _build_problem(
     if substeps is not None:
         if dt is not None:
             raise ValueError("Pass `dt` or `substeps`, not both.")
-        substeps = _positive_int(substeps, "substeps")
+        substeps = check_int(substeps, "substeps")
     else:
         if dt is None:
             w_max = float(np.max(np.linalg.norm(omega_estimate, axis=-1)))
@@ -169,7 +103,7 @@ def _build_problem(
     n_steps = n_intervals * substeps
     if checkpoint:
         n_inner = (
-            _positive_int(checkpoint_every, "checkpoint_every")
+            check_int(checkpoint_every, "checkpoint_every")
             if checkpoint_every is not None
             else max(1, math.ceil(math.sqrt(n_steps)))
         )
