@@ -7,7 +7,9 @@ runs on a ladder of step counts growing by √2 (from 8 steps over the horizon
 until the error is below ``--floor``, stops falling, or a run takes longer than
 ``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and Dopri8 run on the same
 `Euclidean` quaternion ODE as `jaxrot.reference_rollout` (normalised at the end)
-with a PID controller at rtol = atol on a half-decade ladder 1e-2 … 1e-13. The
+with a PID controller at rtol = atol on a half-decade ladder 1e-2 … 1e-13, and so do
+jaxrot's Lie-group pairs rkmk_dopri5 and rkmk_dopri8 as diffrax solvers
+(`jaxrot.solver`, rows ``jaxrot_*_pid``, each body adapting its own steps). The
 error of a row is the largest geodesic orientation error over all bodies at the
 final time against Dopri8 at rtol = atol = 1e-14 in float64. Each row is one
 compiled program (step count and tolerance are runtime values, so each method
@@ -46,6 +48,8 @@ from jaxrot.comparison import machine_info, plot_work_precision
 
 
 DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_dopri5": diffrax.Dopri5, "diffrax_dopri8": diffrax.Dopri8}
+# jaxrot's Lie-group pairs with diffrax's PID controller (`jaxrot.solver`): each body adapts its own steps.
+LIE_ADAPTIVE = ("rkmk_dopri5", "rkmk_dopri8")
 BUDGETS = {"float64": [10.0**-k for k in range(2, 11)], "float32": [10.0**-k for k in range(2, 6)]}
 REFERENCE_TOL = 1e-14
 
@@ -98,6 +102,30 @@ def adaptive_runner(solver, scene, t_end):
         return jaxrot.RotState(traj.q[-1], traj.omega[-1]), result, steps
 
     return jax.jit(run)
+
+
+def lie_adaptive_runner(name, scene, t_end):
+    """`jaxrot.solver(name)` in `diffrax.diffeqsolve` on a `jaxrot.RigidBodyTerm`, vmapped over bodies."""
+    term = jaxrot.RigidBodyTerm(scene.inertia, scene.torque)
+    solver = jaxrot.solver(name)
+
+    def run(state, tol):
+        def one(q, omega):
+            sol = diffrax.diffeqsolve(
+                term, solver, 0.0, t_end, None, jaxrot.RotState(q, omega), args=scene.args,
+                stepsize_controller=diffrax.PIDController(rtol=tol, atol=tol), max_steps=1_000_000,
+                throw=False,
+            )  # fmt: skip
+            return jaxrot.RotState(sol.ys.q[-1], sol.ys.omega[-1]), sol.result, sol.stats["num_steps"]
+
+        return jax.vmap(one, axis_name=PARTICLES)(state.q, state.omega)
+
+    return jax.jit(run)
+
+
+def lie_adaptive_torque_evals(name, mean_steps):
+    """Torque calls of a `jaxrot.solver` pair: every stage but the first (reused), and one at the start."""
+    return (jaxrot.SCHEMES[name].tableau.num_stages - 1) * mean_steps + 1
 
 
 def error_of(q, q_ref):
@@ -153,8 +181,11 @@ def race(
             stalled = len(errors) >= 3 and errors[-1] > 0.7 * errors[-3] and errors[-1] < 1e-3
             if err < floor or seconds > time_cap or stalled or not math.isfinite(err) and k > 20:
                 break
-    for name, solver in DIFFRAX.items():
-        runner = adaptive_runner(solver, scene, t_end)
+    adaptive = [(name, adaptive_runner(solver, scene, t_end), solver) for name, solver in DIFFRAX.items()]
+    adaptive += [
+        (f"jaxrot_{name}_pid", lie_adaptive_runner(name, scene, t_end), name) for name in LIE_ADAPTIVE
+    ]
+    for name, runner, solver in adaptive:
         start = time.perf_counter()
         compiled = runner.lower(state, jnp.asarray(1e-6, dtype_)).compile()
         compile_s = time.perf_counter() - start
@@ -166,8 +197,11 @@ def race(
                 continue
             err = error_of(out.q, q_ref)
             mean_steps = float(np.mean(np.asarray(steps)))
-            stages = solver.tableau.num_stages - (1 if solver.tableau.fsal else 0)
-            evals = 0 if scene.torque is None else int(round(stages * mean_steps)) + 1
+            if isinstance(solver, str):
+                evals = lie_adaptive_torque_evals(solver, mean_steps)
+            else:
+                evals = (solver.tableau.num_stages - (1 if solver.tableau.fsal else 0)) * mean_steps + 1
+            evals = 0 if scene.torque is None else int(round(evals))
             rows.append(
                 {**common, "method": name, "kind": "adaptive", "dt": None, "tol": tol,
                  "n_steps": int(round(mean_steps)), "max_orientation_error_rad": err, "torque_evals": evals,
@@ -184,11 +218,15 @@ def race_table(rows, budgets):
     table = []
     for budget in budgets:
         ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
-        ours = min((r for r in ok if r["kind"] == "fixed"), key=lambda r: r["seconds"], default=None)
-        theirs = min((r for r in ok if r["kind"] == "adaptive"), key=lambda r: r["seconds"], default=None)
+        ours = min((r for r in ok if not _is_diffrax(r)), key=lambda r: r["seconds"], default=None)
+        theirs = min((r for r in ok if _is_diffrax(r)), key=lambda r: r["seconds"], default=None)
         ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
         table.append((budget, ours, theirs, ratio))
     return table
+
+
+def _is_diffrax(row):
+    return row["method"] in DIFFRAX
 
 
 def _label(row):

@@ -30,7 +30,9 @@ from ._particles import per_body as per_body
 from ._reference import reference_rollout as reference_rollout
 from ._rollout import rollout as rollout
 from ._runtime_check import IntegrationError as IntegrationError
+from ._solver import solver as solver
 from ._state import RotState as RotState, Trajectory as Trajectory
+from ._term import RigidBodyTerm as RigidBodyTerm
 from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
 

@@ -20,7 +20,7 @@ Reference:
     2nd ed., Springer (2006), section IV.8.
 """
 
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import diffrax
 import equinox as eqx
@@ -90,9 +90,7 @@ def _combination(dt, weights, vectors):
 def _last_needed_stage(tableau: diffrax.ButcherTableau, with_error: bool) -> int:
     """Number of leading stages that the solution (and error estimate) reads."""
     weights = np.abs(tableau.b_sol) + (np.abs(tableau.b_error) if with_error else 0)
-    needed = int(np.max(np.nonzero(weights)[0])) + 1
-    # A later stage may still be read by the needed ones: explicit tableaux only look back.
-    return needed
+    return int(np.max(np.nonzero(weights)[0])) + 1
 
 
 class LieRungeKuttaCarry(NamedTuple):
@@ -126,6 +124,9 @@ class AbstractLieRungeKutta(AbstractScheme):
 
     tableau: eqx.AbstractClassVar[diffrax.ButcherTableau]
     has_error_estimate: ClassVar[bool] = False
+    # The continuous extension of the tableau (a diffrax ``interpolation_cls``), used by
+    # `jaxrot.solver`'s dense output in the Lie algebra; None when the tableau has none.
+    dense_output: ClassVar[Any] = None
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -148,7 +149,9 @@ class AbstractLieRungeKutta(AbstractScheme):
         return LieRungeKuttaCarry(state, _momentum(state, body_inertia(inertia)))
 
     def step(self, carry, t, dt, inertia, torque, args):
-        return self._step(carry, t, dt, inertia, torque, args, with_error=False)[0]
+        n_stages = _last_needed_stage(self.tableau, with_error=False)
+        ks, taus = self.stages(carry, t, dt, inertia, torque, args, n_stages)
+        return self.combine(carry, dt, inertia, ks, taus, self.tableau.b_sol)
 
     def step_with_error(self, carry, t, dt, inertia, torque, args):
         """``(new carry, (Θ_err (3,), L_err (3,)))``: the step and the embedded error estimate.
@@ -158,22 +161,33 @@ class AbstractLieRungeKutta(AbstractScheme):
         when torque-free)."""
         if not self.has_error_estimate:
             raise ValueError(f"{self.name} has no embedded error estimate.")
-        return self._step(carry, t, dt, inertia, torque, args, with_error=True)
+        n_stages = _last_needed_stage(self.tableau, with_error=True)
+        ks, taus = self.stages(carry, t, dt, inertia, torque, args, n_stages)
+        return self.combine(carry, dt, inertia, ks, taus, self.tableau.b_sol), self.error(dt, ks, taus)
 
-    def _step(self, carry, t, dt, inertia, torque, args, *, with_error):
-        tableau = self.tableau
+    def error(self, dt, ks, taus):
+        """The embedded error estimate ``(Θ_err (3,), L_err (3,))`` of a step's stages."""
+        theta_err = _combination(dt, self.tableau.b_error, ks)
+        momentum_err = None if not taus else _combination(dt, self.tableau.b_error, taus)
+        return theta_err, jnp.zeros_like(theta_err) if momentum_err is None else momentum_err
+
+    def stages(self, carry, t, dt, inertia, torque, args, n_stages, first_torque=None):
+        """The first ``n_stages`` stage slopes ``(K_i, T_i)`` of a step, as two lists of ``(3,)``.
+
+        ``K_i`` is the stage's rotation-vector rate (``dexp⁻¹_{Θ_i}(ω_i)``, world, rad / time)
+        and ``T_i`` its world torque (an empty list when torque-free). ``first_torque``, when
+        given, is used as ``T_1`` instead of calling the torque: the last stage of a
+        first-same-as-last tableau, reused by the adaptive solver."""
         inertia = body_inertia(inertia)
         (q0, omega0), momentum0 = carry
-
-        def omega_of(q, momentum):
-            return rotate(q, inertia.solve(rotate(conjugate(q), momentum)))
-
-        c = np.concatenate([[0.0], tableau.c])
+        c = np.concatenate([[0.0], self.tableau.c])
         ks, taus = [omega0], []
         if torque is not None:
-            taus.append(stage(world_torque(torque, t, q0, omega0, args)))
-        for i in range(1, _last_needed_stage(tableau, with_error)):
-            a_row = tableau.a_lower[i - 1]
+            if first_torque is None:
+                first_torque = world_torque(torque, t, q0, omega0, args)
+            taus.append(stage(first_torque))
+        for i in range(1, n_stages):
+            a_row = self.tableau.a_lower[i - 1]
             theta = _combination(dt, a_row, ks)
             if theta is None:  # a stage at the start point (a zero row)
                 theta = jnp.zeros_like(omega0)
@@ -181,18 +195,22 @@ class AbstractLieRungeKutta(AbstractScheme):
             momentum = momentum0 if impulse is None else momentum0 + impulse
             rotation, c_theta = stage(*_exp_and_coefficient(theta))
             q_i = stage(multiply(rotation, q0))
-            omega_i = stage(omega_of(q_i, momentum))
+            omega_i = stage(_omega(q_i, momentum, inertia))
             ks.append(stage(_dexpinv(theta, c_theta, omega_i)))
             if torque is not None:
                 taus.append(stage(world_torque(torque, t + float(c[i]) * dt, q_i, omega_i, args)))
+        return ks, taus
 
-        step_rotation, _ = _exp_and_coefficient(_combination(dt, tableau.b_sol, ks))
+    def combine(self, carry, dt, inertia, ks, taus, weights) -> LieRungeKuttaCarry:
+        """The carry ``exp(h Σ w_j K_j) ⊗ q_n``, ``L_n + h Σ w_j T_j`` for stage slopes ``ks``, ``taus``."""
+        (q0, _), momentum0 = carry
+        step_rotation, _ = _exp_and_coefficient(_combination(dt, weights, ks))
         q1 = stage(normalize(multiply(step_rotation, q0)))
-        impulse = None if torque is None else _combination(dt, tableau.b_sol, taus)
+        impulse = None if not taus else _combination(dt, weights, taus)
         momentum1 = momentum0 if impulse is None else momentum0 + impulse
-        new = LieRungeKuttaCarry(RotState(q1, omega_of(q1, momentum1)), momentum1)
-        if not with_error:
-            return new, None
-        theta_err = _combination(dt, tableau.b_error, ks)
-        momentum_err = None if torque is None else _combination(dt, tableau.b_error, taus)
-        return new, (theta_err, jnp.zeros_like(omega0) if momentum_err is None else momentum_err)
+        return LieRungeKuttaCarry(RotState(q1, _omega(q1, momentum1, body_inertia(inertia))), momentum1)
+
+
+def _omega(q, momentum, inertia):
+    """World ``ω = R I⁻¹ Rᵀ L`` for the orientation ``q`` and world momentum ``L``."""
+    return rotate(q, inertia.solve(rotate(conjugate(q), momentum)))

@@ -1,6 +1,6 @@
 """RKMK-Dopri5: diffrax's `Dopri5` tableau on SO(3) × R³, order 5 with an embedded error estimate."""
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import diffrax
 
@@ -29,3 +29,4 @@ class RKMKDopri5(AbstractLieRungeKutta):
     order: ClassVar[int] = 5
     tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri5.tableau
     has_error_estimate: ClassVar[bool] = True
+    dense_output: ClassVar[Any] = diffrax.Dopri5.interpolation_cls

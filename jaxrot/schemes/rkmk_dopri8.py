@@ -1,6 +1,6 @@
 """RKMK-Dopri8: diffrax's `Dopri8` tableau on SO(3) × R³, order 8 with an embedded error estimate."""
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import diffrax
 
@@ -29,3 +29,4 @@ class RKMKDopri8(AbstractLieRungeKutta):
     order: ClassVar[int] = 8
     tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri8.tableau
     has_error_estimate: ClassVar[bool] = True
+    dense_output: ClassVar[Any] = diffrax.Dopri8.interpolation_cls
