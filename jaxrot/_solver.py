@@ -20,7 +20,7 @@ from ._state import RotState
 from ._term import RigidBodyTerm
 from .schemes import AbstractLieRungeKutta, AbstractScheme, resolve_scheme
 from .schemes._base import world_torque
-from .schemes._lie_runge_kutta import _combination, exp_and_dexpinv
+from .schemes._lie_runge_kutta import _combination, _momentum, exp_and_dexpinv
 
 
 def _check_term(terms, y0) -> tuple[RigidBodyTerm, Any]:
@@ -185,10 +185,6 @@ class AdaptiveLieSolver(SchemeSolver, diffrax.AbstractAdaptiveSolver):
                 info[key] = jnp.swapaxes(info[key], 0, 1)
         y1 = _batched(y0, scheme.state, new)
         return y1, error, info, (new, last), diffrax.RESULTS.successful
-
-
-def _momentum(state: RotState, inertia):
-    return quat.rotate(state.q, inertia.apply(quat.rotate(quat.conjugate(state.q), state.omega)))
 
 
 def _matrix(inverse):
