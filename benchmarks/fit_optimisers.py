@@ -1,4 +1,4 @@
-"""`fit_inertia`'s whitened L-BFGS against optimistix's Levenberg–Marquardt and Gauss–Newton.
+"""`fit_inertia`'s optimiser (Gauss–Newton, damped) against optimistix's ``least_squares`` solvers.
 
 Run: ``python benchmarks/fit_optimisers.py`` (float64, CPU; ``--repeats 5`` by default).
 
@@ -9,19 +9,20 @@ a heavy top; and noise-free orientations stepped by Zhao itself (400 steps, ever
 saved), torque-free and as a heavy top. Every optimiser starts from `fit_inertia`'s own
 start (the linear angular-momentum estimate) and works on the same objective:
 
-- ``L-BFGS (jaxrot)``: ``jaxrot._fit._optimise``, `fit_inertia`'s optimiser with its
-  defaults (``ftol=1e-7``, the round-off floor, re-whitening every 5 iterations);
+- ``GN (jaxrot)``: ``jaxrot._fit._optimise``, `fit_inertia`'s optimiser with its
+  defaults (optimistix's Gauss–Newton descent with a backtracking Armijo search,
+  forward-mode Jacobian, ``ftol=1e-7`` or the round-off floor, the loss history kept);
 - ``LM`` and ``GN (optimistix)``: ``optimistix.least_squares`` with
-  ``LevenbergMarquardt`` / ``GaussNewton`` (``rtol=atol=1e-10``) on the residual vector
-  whose sum of squares is `fit_inertia`'s objective (``jaxrot._fit._residuals``), in the
-  coordinates whitened by the Gauss–Newton Hessian at the start, as L-BFGS starts; the
-  whitening's forward rollouts are timed in. The whole solve is one compiled program.
+  ``LevenbergMarquardt`` / ``GaussNewton`` (``rtol=atol=1e-10``, their own Cauchy
+  termination, ``jax.linearize`` Jacobians) on the residual vector whose sum of squares
+  is `fit_inertia`'s objective (``jaxrot._fit._residuals``).
 
-Each optimiser runs once to compile; then the three run interleaved (L-BFGS, LM, GN,
-L-BFGS, ...) ``--repeats`` times and the median wall time is printed, with the ratio to
-L-BFGS's median of the same run (the ratios hold on a loaded machine, the seconds less
-so), the iterations, the final objective, whether the optimiser reported success and
-the fitted principal moments (divided by the smallest for torque-free fits).
+Each optimiser runs once to compile; then the three run interleaved ``--repeats`` times
+and the median wall time is printed, with the ratio to ``GN (jaxrot)``'s median of the
+same run (the ratios hold on a loaded machine, the seconds less so), the iterations, the
+final objective, whether the optimiser reported success and the fitted principal
+moments (divided by the smallest for torque-free fits). The table of the L-BFGS
+optimiser that Gauss–Newton replaced is in ``jaxrot/_fit/_optimiser.py``.
 """
 
 import argparse
@@ -96,45 +97,29 @@ def set_up(obs, torque_on, options):
     return problem, params, free, floor
 
 
-def lbfgs(problem, params, free, floor):
+def jaxrot_gn(problem, params, free, floor):
     out = _optimise(
         params, problem, free, adam_steps=0, adam_learning_rate=1e-2, max_iter=500, ftol=1e-7, floor=floor
     )
     return out.params, out.n_iterations, out.converged
 
 
-def _params_at(x, like):
-    """``_Params`` from a flat JAX vector (the traced twin of ``_fit._unflat``)."""
-    out, i = [], 0
-    for leaf in like:
-        out.append(x[i : i + leaf.size].reshape(leaf.shape).astype(leaf.dtype))
-        i += leaf.size
-    return _fit._Params(*out)
-
-
 @eqx.filter_jit
-def _solve(solver, x0, whiten, free, like, problem):
+def _solve(solver, x0, free, like, problem):
     def residuals(z, _):
-        return _fit._residuals(_params_at(x0.at[free].add(whiten @ z), like), problem)[0]
+        return _fit._residuals(_fit._unflat(x0.at[free].set(z), like, x0.dtype), problem)[0]
 
-    z0 = jnp.zeros(whiten.shape[1], x0.dtype)
-    sol = optx.least_squares(residuals, solver, z0, max_steps=200, throw=False)
-    return x0.at[free].add(whiten @ sol.value), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
+    sol = optx.least_squares(residuals, solver, x0[free], max_steps=200, throw=False)
+    return x0.at[free].set(sol.value), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
 def optimistix(solver, problem, params, free):
-    x0 = _fit._flat(params)
-
-    def residuals(vector):
-        return np.asarray(_fit._residuals(_fit._unflat(vector, params, jnp.float64), problem)[0])
-
-    whiten = _fit._whitening(residuals, x0, free)
-    x, steps, ok = _solve(solver, jnp.asarray(x0), jnp.asarray(whiten), jnp.asarray(free), params, problem)
-    return _params_at(x, params), int(steps), bool(ok)
+    x, steps, ok = _solve(solver, jnp.asarray(_fit._flat(params)), jnp.asarray(free), params, problem)
+    return _fit._unflat(x, params, jnp.float64), int(steps), bool(ok)
 
 
 OPTIMISERS = {
-    "L-BFGS (jaxrot)": lambda problem, params, free, floor: lbfgs(problem, params, free, floor),
+    "GN (jaxrot)": jaxrot_gn,
     "LM (optimistix)": lambda problem, params, free, floor: optimistix(
         optx.LevenbergMarquardt(rtol=TOL, atol=TOL), problem, params, free
     ),
@@ -159,7 +144,7 @@ def run_case(name, repeats):
             out = optimise(problem, params, free, floor)
             times[label].append(time.perf_counter() - start)
             assert np.array_equal(_fit._flat(out[0]), _fit._flat(results[label][0]))  # deterministic
-    base = statistics.median(times["L-BFGS (jaxrot)"])
+    base = statistics.median(times["GN (jaxrot)"])
     rows = []
     for label in OPTIMISERS:
         fitted, iterations, ok = results[label]
@@ -199,8 +184,8 @@ def main():
     )
     print()
     print(
-        "| data | optimiser | first call s (compiles) | median s | × L-BFGS | iterations | final objective "
-        "| success | fitted moments |"
+        "| data | optimiser | first call s (compiles) | median s | × GN (jaxrot) | iterations "
+        "| final objective | success | fitted moments |"
     )
     print("|---|---|---:|---:|---:|---:|---:|---|---|")
     for name in opts.cases:

@@ -11,7 +11,7 @@ from ._inertia import body_inertia
 from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
 from ._sharding import particle_sharded
 from ._state import RotState, Trajectory
-from ._validation import check_bodies, check_times, check_torque, is_concrete
+from ._validation import check_bodies, check_times, check_torque, check_values, is_concrete
 from .schemes._base import body_torque
 
 
@@ -97,20 +97,16 @@ def reference_rollout(
         diffrax.Dopri8(), flat.q, flat.omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps,
         args_axes,
     )  # fmt: skip
-    if is_concrete(result):
-        failed = np.asarray(result != diffrax.RESULTS.successful)
-        if np.any(failed):
-            raise RuntimeError(
-                f"reference_rollout: the diffrax solve failed for {int(failed.sum())} of {failed.size} "
-                f"particle(s) (max_steps={max_steps}, rtol={rtol:g}, atol={atol:g}). Raise `max_steps`, "
-                "loosen the tolerances, or check the torque for blow-up."
-            )
-    else:
-        traj = eqx.error_if(
-            traj,
-            result != diffrax.RESULTS.successful,
-            "reference_rollout: the diffrax solve failed; raise `max_steps` or loosen rtol/atol.",
-        )
+    failed = result != diffrax.RESULTS.successful
+    count = int(np.sum(failed)) if is_concrete(failed) else "some"
+    traj = check_values(
+        traj,
+        failed,
+        f"reference_rollout: the diffrax solve failed for {count} of {failed.size} particle(s) "
+        f"(max_steps={max_steps}, rtol={rtol:g}, atol={atol:g}). Raise `max_steps`, loosen the "
+        "tolerances, or check the torque for blow-up.",
+        error=RuntimeError,
+    )
     return unflatten_trajectory(traj, batch_shape)
 
 

@@ -2,7 +2,14 @@
 
 Shape checks always run (shapes are static, even under ``jit``). Value checks
 (finite, unit norm, positive definite, …) run only on concrete arrays; on
-tracers they are skipped, never wrong.
+tracers they are skipped, never wrong. They are not turned into ``eqx.error_if``
+checks in the compiled program, on purpose: a check over every particle is a
+global reduction, which a sharded rollout would have to communicate
+(tests/test_sharding.py asserts that per-body torques communicate nothing), and
+non-finite states inside ``jit`` are what ``rollout(..., runtime_check=True)``
+reports, with the step they appeared at. Results that only exist at run time (a
+failed reference solve) go through `check_values`: one path that raises now for
+concrete values and at run time for traced ones.
 
 `jaxrot.fit_inertia`'s checks (`check_observed`, `check_int`, `check_weight`,
 `check_finite_array`) live here too; they reject traced inputs instead, as the fit
@@ -11,6 +18,7 @@ runs its optimiser eagerly.
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -24,6 +32,20 @@ SUPPORTED_DTYPES = ("float32", "float64")
 
 def is_concrete(*xs) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
+
+
+def check_values(x, failed, message, error=ValueError):
+    """``x``, after checking that ``failed`` (a boolean array) holds nowhere.
+
+    Concrete ``failed``: raises ``error(message)`` now. Traced: returns ``x`` with an
+    ``eqx.error_if`` attached, which raises at run time; use the returned value, or
+    the check is dropped with the unused branch.
+    """
+    if is_concrete(failed):
+        if np.any(np.asarray(failed)):
+            raise error(message)
+        return x
+    return eqx.error_if(x, failed, message)
 
 
 def float_dtype(*xs):

@@ -5,8 +5,8 @@ default) from a fitted initial state; the objective is the mean squared
 geodesic angle between modelled and observed orientations (plus, when given,
 angular velocities). The tensor is parameterised so that only physically
 possible tensors can come out (`inertia_from_cholesky`); the optimiser is
-L-BFGS (optax) in Gauss–Newton-whitened coordinates, started from a linear
-angular-momentum-balance estimate (see `fit_inertia` for the reasons).
+optimistix's Gauss–Newton, started from a linear angular-momentum-balance
+estimate (see `fit_inertia` for the reasons).
 
 Long horizons: the scan over time is split into checkpointed chunks of about
 ``√N`` steps (``jax.checkpoint`` around an inner ``lax.scan``), so the memory of a
@@ -16,7 +16,7 @@ multiple shooting (``segments > 1``).
 One concept per module: `_parameterisation` (the physical tensor parameters),
 `_problem` (checked observations, segments, the model's configuration),
 `_objective` (the model and its misfits), `_initial` (the linear start),
-`_optimiser` (whitened L-BFGS) and `_fit_inertia` (the entry point).
+`_optimiser` (Gauss–Newton) and `_fit_inertia` (the entry point).
 """
 
 from ._fit_inertia import FitResult as FitResult, fit_inertia as fit_inertia
@@ -27,7 +27,7 @@ from ._objective import (
     _single_shooting_loss as _single_shooting_loss,
     _value_and_grad as _value_and_grad,
 )
-from ._optimiser import _round_off_floor as _round_off_floor, _whitening as _whitening
+from ._optimiser import _round_off_floor as _round_off_floor
 from ._parameterisation import (
     _flat as _flat,
     _Params as _Params,

@@ -34,12 +34,12 @@ class FitResult(NamedTuple):
         loss: final objective (scalar, ≥ 0; rad² for the orientation part).
         rms_angle: root-mean-square geodesic misfit of the orientations (rad).
         loss_history: objective before each optimiser iteration and at the end
-            ``(n_iterations + 1,)`` (Adam steps first, if any, then L-BFGS).
-        converged: True when L-BFGS stopped on its tolerance (predicted
+            ``(n_iterations + 1,)`` (Adam steps first, if any, then Gauss–Newton).
+        converged: True when Gauss–Newton stopped on its tolerance (predicted
             relative decrease of the objective ≤ ``ftol``, or the objective down
             to round-off: see ``ftol`` in `fit_inertia`), not on ``max_iter`` or
             a failed line search.
-        n_iterations: optimiser iterations run (Adam + L-BFGS).
+        n_iterations: optimiser iterations run (Adam + Gauss–Newton).
         initial_inertia: the linear angular-momentum-balance estimate the fit
             started from ``(3, 3)`` (same normalisation as ``inertia``).
         dt: the largest integrator step used.
@@ -108,21 +108,20 @@ def fit_inertia(
     ``ω0 = R₀ I⁻¹ R₀ᵀ L₀``. It lands within ~0.3 % of the tensor, inside the basin
     of the nonlinear fit, so no multi-start is needed.
 
-    Optimiser: L-BFGS (optax's ``scale_by_lbfgs`` directions, a weak-Wolfe line
-    search) in coordinates whitened by the Gauss–Newton Hessian ``2 JᵀJ`` (``J`` by
-    finite differences of forward rollouts), re-whitened every 5 iterations or
-    when the objective has dropped 4×. Why: the misfit of a long rollout is a
-    narrow curved valley (the phase of the motion is very sensitive to ``I``
-    and ``ω0``: 0.3 % in ``I`` costs 0.2 rad of misfit over 10 s), with
-    parameter sensitivities spread over ~5 decades. Whitened, L-BFGS reaches
-    the noise floor in 2–5 iterations on the test problems; unwhitened it
-    took ~500. Adam (``adam_steps``, ``adam_learning_rate``; off by default)
-    with a fixed learning rate cannot follow the valley and stalls far above
-    the noise floor (``benchmarks/fit_memory.py`` prints the comparison); it
-    is kept as an optional warm-up for a start far from the optimum. The line
-    search runs in Python over the one compiled value-and-gradient: optax's
-    compiled zoom line search inlines several more copies of the gradient
-    through the rollout and tripled the compile time (6 s → 17–19 s).
+    Optimiser: Gauss–Newton (optimistix's ``NewtonDescent`` on ``JᵀJ``, ``J`` by
+    forward-mode differentiation of the residuals through the rollout) with a
+    backtracking Armijo search from the full step, compiled as one loop. Why: the
+    misfit of a long rollout is a narrow curved valley (the phase of the motion
+    is very sensitive to ``I`` and ``ω0``: 0.3 % in ``I`` costs 0.2 rad of misfit
+    over 10 s), with parameter sensitivities spread over ~5 decades; Gauss–Newton
+    takes its curvature from ``JᵀJ``, so the spread costs it nothing, and it
+    reaches the noise floor in 3–5 iterations on the test problems. It replaced
+    L-BFGS in Gauss–Newton-whitened coordinates, which took 2.7–13× longer to the
+    same fit (the table is in ``jaxrot/_fit/_optimiser.py``). Adam
+    (``adam_steps``, ``adam_learning_rate``; off by default) with a fixed learning
+    rate cannot follow the valley and stalls far above the noise floor
+    (``benchmarks/fit_memory.py`` prints the comparison); it is kept as an
+    optional warm-up for a start far from the optimum.
 
     Time step: each observation interval is split into ``substeps`` equal
     steps. By default ``dt`` turns the body by at most 0.01 rad per step at the
@@ -152,15 +151,15 @@ def fit_inertia(
         segments: number of multiple-shooting segments (1: single shooting).
         continuity_weight: weight of the joint mismatch (``segments > 1``).
         omega_weight: weight (time²) of the angular-velocity misfit.
-        adam_steps, adam_learning_rate: optional Adam warm-up before L-BFGS.
-        max_iter: L-BFGS iteration cap.
-        ftol: stop when the decrease that the L-BFGS model predicts for the
-            next step, ``−½ gᵀd``, is ≤ ``ftol ×`` the objective ``f``. With ``N``
+        adam_steps, adam_learning_rate: optional Adam warm-up before Gauss–Newton.
+        max_iter: Gauss–Newton iteration cap.
+        ftol: stop when the decrease that the Gauss–Newton model predicts for
+            the next full step ``d``, ``|J d|²``, is ≤ ``ftol ×`` the objective ``f``. With ``N``
             residuals at the noise floor this leaves the parameters within
             ``√(ftol N)`` standard errors of the optimum (0.01 for the default
             and ``N = 600``). A relative test cannot end a perfect fit
             (noise-free data stepped by the same scheme): there ``f`` and
-            ``gᵀd`` are both round-off, with no ratio of their own. So the fit
+            ``|J d|²`` are both round-off, with no ratio of their own. So the fit
             also stops, converged, once ``f`` is at most its round-off floor:
             each of the ``n`` steps of a segment rounds the state by ~eps of the
             dtype, so an exact model misses exact data by up to
