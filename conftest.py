@@ -3,13 +3,28 @@
 import os
 
 
-# Four fake CPU devices (tests/test_sharding.py); must be set before the backend starts.
-os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
+# Four fake CPU devices (tests/test_sharding.py); must be set before the backend starts. And LLVM at
+# -O0 for XLA:CPU's generated code: compiling dominates this suite (a test's programs compile in
+# seconds and run in milliseconds), and -O0 cut the compile-bound tests' time by 10-30 % (measured on
+# tests/test_rotor.py, tests/test_zhao.py and a fit); the programs' semantics, hence every tolerance,
+# are the same at any optimisation level.
+os.environ.setdefault(
+    "XLA_FLAGS", "--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0"
+)
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
+
+# JAX's persistent compilation cache: compiling dominates this suite's time (a test's rollouts,
+# references and gradients compile in seconds and run in milliseconds), and the slow set, a second
+# run, or the other xdist worker reuse what one run compiled. JAXROT_TEST_CACHE="" turns it off.
+_cache = os.environ.get("JAXROT_TEST_CACHE", os.path.join(os.path.dirname(__file__), ".jax_cache"))
+if _cache:
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
@@ -44,3 +59,14 @@ def _release_compiled_code():
     counts = _memory_maps()
     if counts is not None and counts[0] > counts[1] // 2:
         jax.clear_caches()
+
+
+# Long items that cannot carry a decorator: the notebooks (also executed by the documentation build,
+# `mkdocs build`, in .ci/run) and the longest docstring examples. Run them with `pytest -m slow`.
+SLOW_ITEMS = ("notebooks/", "jaxrot/stability.py::", "jaxrot/comparison.py::")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid.startswith(SLOW_ITEMS):
+            item.add_marker(pytest.mark.slow)

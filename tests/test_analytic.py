@@ -87,6 +87,7 @@ def _to_numpy(traj):
     return jaxrot.Trajectory(*(np.asarray(x, dtype=np.float64) for x in traj))
 
 
+@pytest.mark.slow
 def test_free_top_against_the_reference_and_in_the_special_cases():
     """Every case in one batch (one reference solve, one compile per inertia form and dtype).
 
@@ -192,6 +193,7 @@ def test_free_top_against_the_reference_and_in_the_special_cases():
     assert np.max(_max_errors(exact32, exact_rounded, generic)[0]) < 1e-3  # 4.4e-4, near the separatrix
 
 
+@pytest.mark.slow
 def test_batch_shapes_shared_inertia_and_start_time():
     rng = np.random.default_rng(2)
     q = quat.normalize(jnp.asarray(rng.normal(size=(2, 3, 4))))
@@ -212,6 +214,7 @@ def test_batch_shapes_shared_inertia_and_start_time():
     np.testing.assert_allclose(later.omega[2], exact.omega[2], atol=1e-13)
 
 
+@pytest.mark.slow
 def test_gradients_are_finite_and_match_finite_differences():
     """At rest, for pure spin, a symmetric top and a generic one: finite. Generic and symmetric
     (including the symmetry-breaking inertia direction): equal to central differences."""
@@ -349,6 +352,7 @@ def _one_flight_loss(q, omega, inertia, t):
 _one_flight_grad = jax.jit(jax.grad(_one_flight_loss, argnums=(0, 1, 2)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("moments, omega_body, t", _near_steady_points())
 def test_gradients_at_short_flights_and_near_steady_rotation(moments, omega_body, t):
     """free_motion's derivatives w.r.t. ω, q and the moments against 4th-order central differences

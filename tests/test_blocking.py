@@ -43,7 +43,7 @@ def test_blocks_round_trip_with_a_strided_split(n):
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
 @pytest.mark.parametrize("scheme", scheme_params(sorted(jaxrot.SCHEMES)))
-@pytest.mark.parametrize("n", [12, 13])
+@pytest.mark.parametrize("n", [pytest.param(12, marks=pytest.mark.slow), 13])  # 13: a ragged last block
 def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
     # Per-body args, per-particle inertia, a drive, the runtime check and the carry all blocked.
     state, _, dt, kwargs = driven_problem(dtype, n)
@@ -61,6 +61,7 @@ def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
     assert_same(jaxrot.rollout(scheme, state, inertia, dt, **call), one, ulps)
 
 
+@pytest.mark.slow
 def test_blocked_chunks_and_gradients_match_unblocked(tiny_blocks):
     state, inertia, dt, kwargs = driven_problem(jnp.float64, 12)
 

@@ -149,6 +149,7 @@ def counting_torque():
     return torque, calls
 
 
+@pytest.mark.slow
 def test_chunks_of_one_size_compile_once():
     state = small_state()
 

@@ -26,6 +26,7 @@ from jaxrot.comparison import (
 from jaxrot.schemes.euler import Euler
 
 
+@pytest.mark.slow
 def test_cli_runs_end_to_end_and_writes_table_csv_json_png(tmp_path):
     out = tmp_path / "out"
     # fmt: off
@@ -92,6 +93,7 @@ class _Registered(Euler):
     name: ClassVar[str] = "registered_later"
 
 
+@pytest.mark.slow
 def test_a_newly_registered_scheme_gets_its_rows_with_no_other_change(monkeypatch):
     """By default every scheme in SCHEMES and every adaptive solver gets its rows."""
     registry = {"euler": jaxrot.SCHEMES["euler"], "registered_later": _Registered()}
@@ -120,6 +122,7 @@ def _independent_energy_drift(scene, traj):
     return float(jnp.max(jnp.abs(energies - energies[0])) / jnp.abs(energies[0]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_error_columns_equal_an_independent_computation(small_rows, dtype):
     scene = jaxrot.SCENES["heavy_top"](getattr(jnp, dtype))

@@ -142,6 +142,7 @@ def test_float32_in_float32_out():
     np.testing.assert_allclose(ell.ellipkinc(f32(2.0), f32(0.5)), special.ellipkinc(2.0, 0.5), rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_gradients_are_finite_and_correct_away_from_m_one():
     u = jnp.linspace(-5.0, 5.0, 11)
     # Derivatives of (sn, cn, dn, am) in u and m, one compiled Jacobian for every m.

@@ -43,7 +43,7 @@ def test_memory_is_independent_of_the_number_of_steps(scheme, blocked, monkeypat
     assert sizes[1000][1] - sizes[100][1] == 9 * (1 + 64 * 7) * 8
 
 
-@pytest.mark.parametrize("scheme", ["no_squish", "rozmanov"])
+@pytest.mark.parametrize("scheme", ["no_squish", pytest.param("rozmanov", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("runtime_check", [False, True])
 def test_the_compiled_core_keeps_the_final_carry_only_when_asked(scheme, runtime_check):
     """`rollout` without ``return_carry`` gets the saved states and the scheme's summary of the
@@ -73,6 +73,7 @@ def memory_maps():
         return sum(1 for _ in f)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts /proc/self/maps")
 def test_clear_caches_releases_the_mappings_of_compiled_rollouts():
     """README "Many compiles in one process": each compiled rollout holds memory mappings

@@ -21,7 +21,13 @@ def test_the_readme_has_its_examples():
     assert len(BLOCKS) == len(RUNNABLE) + 1 >= 4
 
 
-@pytest.mark.parametrize("code", RUNNABLE, ids=[b.splitlines()[-1][:40] for b in RUNNABLE])
+# The diffrax example compiles adaptive order-8 solves (~30 s); tests/test_solver.py checks the same API
+# by default, and the example itself runs in the slow set.
+@pytest.mark.parametrize(
+    "code",
+    [pytest.param(b, marks=pytest.mark.slow if "diffeqsolve" in b else ()) for b in RUNNABLE],
+    ids=[b.splitlines()[-1][:40] for b in RUNNABLE],
+)
 def test_readme_example_runs(code, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)

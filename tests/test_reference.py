@@ -55,6 +55,7 @@ def test_conserves_energy_and_world_angular_momentum_of_a_free_asymmetric_body()
     np.testing.assert_allclose(jnp.linalg.norm(ref.q, axis=-1), 1.0, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_full_tensor_agrees_with_principal_moments():
     state = principal_state(omega_body=jnp.array([1.0, 2.0, 0.5]))
     ts = jnp.linspace(0.0, 5.0, 6)
@@ -63,6 +64,7 @@ def test_full_tensor_agrees_with_principal_moments():
     np.testing.assert_allclose(full.omega, diag.omega, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_batched_particles_and_single_time():
     rng = np.random.default_rng(3)
     q = quat.normalize(jnp.asarray(rng.normal(size=(2, 3, 4))))

@@ -85,6 +85,7 @@ def _errors(a, b):
     return np.asarray(quat.angle_between(a[0], b[0])), np.asarray(jnp.max(jnp.abs(a[1] - b[1]), axis=-1))
 
 
+@pytest.mark.slow
 def test_matches_exact_motion_to_round_off():
     """|ω| |t| <= 0.5: the truncation error of 3 DMV10 steps, ~(|ω|t/3)^11 ≈ 1e-14 at 0.5 (measured
     by the order test below), plus a few hundred ulp of round-off in both solutions."""
@@ -94,6 +95,7 @@ def test_matches_exact_motion_to_round_off():
     assert angle.max() < 1e-13 and omega.max() < 1e-13, (angle.max(), omega.max())
 
 
+@pytest.mark.slow
 def test_order_ten_in_t():
     """One DMV10 step (``substeps=1``): local error ∝ t^11 (Hairer & Vilmart's order 10). A wrong
     coefficient of degree k in the modified moments would leave order 2k <= 8 (slope <= 9)."""
@@ -150,6 +152,7 @@ def test_special_cases_closed_forms():
     np.testing.assert_allclose(w1, w, atol=8 * eps)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["symmetric_12", "symmetric_23", "t_negative", "needle_short"])
 def test_special_cases_against_exact(name):
     _, exact, rotor = _special(name)
@@ -163,6 +166,7 @@ def test_outside_valid_range_is_nan(name):
     assert np.all(np.isnan(q1)) and np.all(np.isnan(w1))
 
 
+@pytest.mark.slow
 def test_substeps_argument():
     (q, w, moments, t), exact, _ = _special("too_long")
     with pytest.raises(ValueError, match="substeps"):
@@ -242,6 +246,7 @@ def _flat(x):
     return jnp.concatenate([q, w])
 
 
+@pytest.mark.slow
 def test_gradients_match_central_differences():
     """Forward and reverse derivatives in q, ω, moments and t at the special points and a generic
     one, against central differences (step 1e-6: truncation ~1e-12 · f''', round-off ~1e-10)."""

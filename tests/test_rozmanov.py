@@ -32,6 +32,7 @@ def test_converges_within_max_iter_at_a_typical_step():
     assert 1 <= int(carry.iterations[0]) <= int(carry.max_iterations[0])
 
 
+@pytest.mark.slow
 def test_says_so_when_it_does_not_converge():
     with pytest.warns(RuntimeWarning, match="did not reach tol.*max_iter=1"):
         traj, carry = jaxrot.rollout(Rozmanov(max_iter=1), TUMBLING, MOMENTS, 0.05, 20, return_carry=True)

@@ -71,7 +71,7 @@ def test_every_scene_runs_with_every_scheme_and_keeps_its_energy(name, scheme):
         assert scene.energy(0.0, traj.q, traj.omega) is None
 
 
-@pytest.mark.parametrize("scheme", ["zhao", "no_squish", "splitting"])
+@pytest.mark.parametrize("scheme", scheme_params(["zhao", "no_squish", "splitting"]))
 def test_free_bodies_keep_their_world_angular_momentum(scheme):
     for scene in (small("free_top"), small("tumbling_cloud")):
         traj = run(scheme, scene)
@@ -117,6 +117,7 @@ def test_drag_takes_energy_at_c_omega_squared(scheme):
     assert lost > 0.05 * float(energy[0])  # the drag did something
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scheme", scheme_params())
 def test_time_and_velocity_dependent_scenes_follow_the_reference(scheme):
     for name in ("dipole_rotating_field", "viscous_drag"):
@@ -139,6 +140,7 @@ def _internal_torques(scene, q):
     return jax.vmap(lambda qi, wi: model(0.0, qi, wi, scene.args), axis_name="particles")(q, zeros)
 
 
+@pytest.mark.slow
 def test_dipole_torques_match_the_energy_gradient():
     """τ_i = −(∂U/∂θ_i): the coupled torque is the energy's rotational derivative for every body."""
     scene = dipole_cloud(n_side=3, external_field=(0.0, 0.0, 0.0))
@@ -161,6 +163,7 @@ def test_mutual_dipole_torques_balance_the_pins():
     np.testing.assert_allclose(total, -pins, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("external", [(0.0, 0.0, 0.0), (0.0, 0.0, 0.5)])
 @pytest.mark.parametrize("scheme", ["zhao", "no_squish", "splitting"])
 def test_dipole_cloud_momentum_changes_only_by_external_and_pin_torques(scheme, external):
@@ -308,6 +311,7 @@ def test_no_drive_runs_no_drive_code(scheme):
 # --- the CLI -----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_lists_every_scene():
     proc = subprocess.run(
         [sys.executable, "-m", "jaxrot", "compare", "--list-scenes"],
@@ -320,6 +324,7 @@ def test_cli_lists_every_scene():
         assert name in proc.stdout
 
 
+@pytest.mark.slow
 def test_compare_runs_a_coupled_multi_body_scene():
     rows = compare(
         "dipole_cloud", t_end=0.2, coarse_steps=10, levels=1, schemes=["no_squish"],

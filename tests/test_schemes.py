@@ -54,9 +54,14 @@ def test_every_scheme_has_a_ladder_and_metadata():
         assert scheme.torque_evals_per_step >= 1
 
 
+# By default: Euler's under gravity (its order is measured nowhere else; Zhao's is, by default, in
+# tests/test_zhao.py); the rest of the matrix in the slow set.
 @pytest.mark.parametrize("inertia_form", ["diagonal", "full"])
-@pytest.mark.parametrize("torque_name", ["free", "gravity"])
-@pytest.mark.parametrize("name", list(ORDER_LADDERS))
+@pytest.mark.parametrize("torque_name", [pytest.param("free", marks=pytest.mark.slow), "gravity"])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(n, marks=() if n == "euler" else pytest.mark.slow) for n in ORDER_LADDERS],
+)
 def test_measured_order(name, torque_name, inertia_form):
     """Log-log slope of max orientation error against dt, reference at rtol=atol=1e-13."""
     if torque_name == "free" and name in EXACT_WHEN_TORQUE_FREE:
@@ -74,6 +79,7 @@ def test_measured_order(name, torque_name, inertia_form):
     assert fitted_order(dts, errors) == pytest.approx(jaxrot.SCHEMES[name].order, abs=0.15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_zero_angular_velocity_without_torque_is_at_rest_with_finite_gradients(name):
     q0 = quat.exp(jnp.array([0.2, -0.1, 0.4]))
@@ -177,6 +183,7 @@ def test_torque_calls_match_the_declared_count(name):
     assert len(calls) == scheme.torque_evals_per_step * 7 + scheme.torque_evals_at_init
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_gradients_match_central_differences(name):
     """d(loss)/d(rotation vector of q0, omega0, inertia, torque parameter), float64, 1e-6 relative."""

@@ -47,8 +47,9 @@ def _pid(tol):
     return diffrax.PIDController(rtol=jnp.asarray(tol), atol=jnp.asarray(tol))
 
 
-# One scheme per carry kind in the default set (plain state, a momentum, the adaptive pair's carry).
-SOLVER_DEFAULTS = {"zhao", "no_squish", "rkmk_dopri5"}
+# By default a plain-state carry and the adaptive pair's; the momentum carries (no_squish, the RKMK
+# family's L) and the rest in the slow set.
+SOLVER_DEFAULTS = {"zhao", "rkmk_dopri5"}
 
 
 @pytest.mark.parametrize(
@@ -161,6 +162,7 @@ def test_dense_output_order(name, steps, q_order, omega_order):
     assert abs(omega_slope - omega_order) < 0.3, (omega_slope, errors)
 
 
+@pytest.mark.slow
 def test_gradient_through_adaptive_solve_matches_central_differences():
     """d/d(inertia) of a projection of the final (q, ω) through a PID-controlled solve (default adjoint).
 
@@ -187,6 +189,7 @@ def _final_q(state, adjoint=None):
     return sol.ys.q[-1]
 
 
+@pytest.mark.slow
 def test_vmap_over_bodies_equals_one_solve_each():
     """`jax.vmap` over diffeqsolve: each body adapts its own steps, as when solved alone.
 
@@ -214,6 +217,7 @@ def test_direct_adjoint_gives_the_default_adjoints_gradient():
     )
 
 
+@pytest.mark.slow
 def test_made_jump_rebuilds_the_carry():
     """A jump at t0 makes the solver rebuild its carry (reused torque, momentum) from y: same result."""
     kwargs = dict(stepsize_controller=_pid(1e-8), max_steps=1000)
@@ -250,6 +254,7 @@ def test_bad_state_and_inertia_are_refused():
         jaxrot.RigidBodyTerm(MOMENTS, "gravity")
 
 
+@pytest.mark.slow
 def test_diffrax_solvers_accept_the_same_term():
     """The Euclidean vector field: Tsit5 on `RigidBodyTerm` agrees with the reference (R⁴ integration)."""
     ts = jnp.linspace(0.0, 1.0, 3)

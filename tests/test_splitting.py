@@ -25,6 +25,7 @@ SPLITTING = Splitting()
 TUMBLING = principal_state(omega_body=jnp.array([1.0, 2.0, 0.5]))
 
 
+@pytest.mark.slow
 def test_torque_free_is_exact_at_large_steps():
     """dt = 0.5 / |ω|, 200 steps (about 100 rad of rotation), both inertia forms, cases A and B,
     symmetric, spherical, at rest: the steps compose exact flows, so the error against the exact
@@ -61,6 +62,7 @@ def gravity_and_damping(t, q, omega, args):
     return gravity_torque(t, q, omega, args["gravity"]) - args["damping"] * omega
 
 
+@pytest.mark.slow
 def test_measured_order_is_two():
     """Log-log slope of the max orientation error against dt (reference at rtol = atol = 1e-13),
     dt = 0.1 … 0.0125 to t = 4, for a torque that depends on the orientation and on ω.
@@ -89,6 +91,7 @@ def test_torque_is_called_once_per_step_plus_once_at_the_start():
     np.testing.assert_allclose(sorted(calls), [1.0 + 0.1 * k for k in range(8)], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_zero_angular_velocity_without_torque_has_finite_exact_gradients():
     """At rest (the value is checked in the torque-free test) the derivatives are finite and exact:
     the inertia cannot matter, and a small spin ω moves the body by exp(ω T) ⊗ q0."""

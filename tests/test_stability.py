@@ -182,6 +182,7 @@ def test_extreme_inertia_and_rest_are_finite_and_accurate(name):
     np.testing.assert_allclose(traj.q[:, n:], jnp.broadcast_to(Q0, traj.q[:, n:].shape), atol=1e-15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_gradients_through_1e4_steps_at_extreme_bodies_and_rest(name):
     """jax.grad through 10^4 steps (t = 5) w.r.t. ω₀ (also at ω₀ = 0) and the moments (also of
@@ -377,6 +378,7 @@ DZ_ERROR["splitting"] = DZ_STEPS * EPS["float64"] / (1 - DZ_M)
 DZ_PERIOD["splitting"] = DZ_ERROR["splitting"] / (DZ_NU * 3 * flip_period(DZ_MOMENTS, DZ_OMEGA_BODY))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_intermediate_axis_flip(name):
     """Agreement with the exact motion while comparison is meaningful, and the flip period.

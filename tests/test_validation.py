@@ -126,6 +126,7 @@ def test_n_steps_traced_is_rejected_clearly():
         jax.jit(lambda n: run(n_steps=n))(3)
 
 
+@pytest.mark.slow
 def test_checks_skip_tracers_under_jit_and_grad():
     """A non-unit q or a non-physical inertia under jit is the caller's business: no check, no error."""
     off_unit = jaxrot.RotState(Q * 1.5, OMEGA)

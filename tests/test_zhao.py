@@ -34,7 +34,10 @@ def damping_torque(t, q, omega, c):
 
 @pytest.mark.parametrize(
     "torque, args",
-    [(time_dependent_torque, jnp.asarray(2.0)), (damping_torque, jnp.asarray(0.5))],
+    [
+        pytest.param(time_dependent_torque, jnp.asarray(2.0), marks=pytest.mark.slow),
+        (damping_torque, jnp.asarray(0.5)),
+    ],
     ids=["time-dependent", "velocity-dependent"],
 )
 def test_measured_order_is_two_for_time_and_velocity_dependent_torque(torque, args):
