@@ -112,10 +112,14 @@ def _forward_jacobian(residuals):
     def fn(z):
         return residuals(z)
 
+    def value_twice(z):  # jacfwd's output and, as its aux, the value: one rollout traced, not two
+        r = residuals(z)
+        return r, r
+
     @fn.defjvp
     def fn_jvp(primals, tangents):
         (z,), (t,) = primals, tangents
-        jac, r = jax.jacfwd(lambda z: (residuals(z), residuals(z)), has_aux=True)(z)
+        jac, r = jax.jacfwd(value_twice, has_aux=True)(z)
         return r, jac @ t
 
     return fn
@@ -160,7 +164,8 @@ def _gauss_newton(z0, x, free, like, problem, ftol, floor, max_iter: int):
         n = state.num_accepted_steps - 1  # the first step evaluates z0 and always accepts it
         history = history.at[jnp.clip(n, 0, max_iter)].set(f)
         full_step, _ = solver.descent.step(jnp.ones((), z.dtype), state.descent_state)
-        predicted = -jnp.sum((2 * r + state.f_info.jac.mv(full_step)) * state.f_info.jac.mv(full_step))
+        moved = state.f_info.jac.mv(full_step)
+        predicted = -jnp.sum((2 * r + moved) * moved)
         accepted = state.num_steps_since_acceptance == 0
         converged = accepted & ((f <= floor) | (predicted <= ftol * f))
         done = converged | (accepted & (n >= max_iter)) | (state.num_steps_since_acceptance >= MAX_REJECTIONS)
