@@ -146,9 +146,39 @@ def fixed_step_runner(scheme, inertia, torque=None, args=None):
 DEFAULT_SCHEMES = {"zhao"}
 
 
+# Members of a family run the same code on other coefficients (Butcher tableaux for rkmk4,
+# rkmk_dopri5 and rkmk_dopri8; RKN weights for srkn6b and srkn14a): the contract tests of the shared
+# machinery (batching, blocking, chunks, sharding, drives, memory, finite gradients at rest, bad input)
+# run on one member of each family; what depends on the coefficients (orders, limits, drift, accuracy
+# tables, gradients against central differences in tests/test_high_order.py) runs on every scheme.
+SAME_CODE_AS = {"rkmk_dopri5": "rkmk4", "rkmk_dopri8": "rkmk4", "srkn14a": "srkn6b"}
+
+
 def scheme_params(names=None):
     """``names`` (default: every registered scheme) for parametrize, the others marked slow."""
     import pytest
 
     names = list(jaxrot.SCHEMES) if names is None else list(names)
     return [pytest.param(n, marks=() if n in DEFAULT_SCHEMES else pytest.mark.slow) for n in names]
+
+
+def contract_params():
+    """One scheme of each family (`SAME_CODE_AS`), for the contract tests, as `scheme_params`."""
+    return scheme_params(sorted(n for n in jaxrot.SCHEMES if n not in SAME_CODE_AS))
+
+
+def rotor_flows(name):
+    """Free-rotor flows per step: the sub-steps whose roundings a splitting adds up (0 for the others)."""
+    from jaxrot.schemes import AbstractRKNSplitting, Splitting
+
+    scheme = jaxrot.SCHEMES[name]
+    if isinstance(scheme, AbstractRKNSplitting):
+        return len(scheme.rotor_weights)
+    return 1 if isinstance(scheme, Splitting) else 0
+
+
+def refuses_velocity_torques(name):
+    """Whether the scheme refuses a torque that depends on ω, by design (the RKN splittings)."""
+    from jaxrot.schemes import AbstractRKNSplitting
+
+    return isinstance(jaxrot.SCHEMES[name], AbstractRKNSplitting)

@@ -3,7 +3,7 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, assert_same, driven_problem, scheme_params
+from helpers import MOMENTS, assert_same, contract_params, driven_problem
 
 import jaxrot
 
@@ -28,7 +28,7 @@ def concatenate(chunks):
 
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-@pytest.mark.parametrize("scheme", scheme_params(sorted(jaxrot.SCHEMES)))
+@pytest.mark.parametrize("scheme", contract_params())
 def test_chunks_concatenate_to_one_call_bit_for_bit(scheme, dtype):
     state, inertia, dt, kwargs = problem(dtype)
     setup, chunk_steps, lengths, steps = SETUPS[dtype]

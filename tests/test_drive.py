@@ -3,19 +3,18 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, gravity_args, principal_state, scheme_params
+from helpers import MOMENTS, contract_params, gravity_args, principal_state
 
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot.scenes import gravity_torque
 
 
-SCHEME_NAMES = list(jaxrot.SCHEMES)
 TUMBLING = principal_state(omega_body=jnp.array([1.0, 2.0, 0.5]))
 OMEGA_IMPOSED = jnp.array([0.4, -1.1, 2.0])
 
 
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", contract_params())
 def test_imposed_velocity_rotates_at_exactly_that_rate(name):
     drive = jaxrot.Drive.imposed_velocity(OMEGA_IMPOSED)
     dt, n = 0.01, 100
@@ -34,7 +33,7 @@ def test_imposed_velocity_rotates_at_exactly_that_rate(name):
     assert float(quat.angle_between(traj.q[-1], expected)) < 1e-12
 
 
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", contract_params())
 def test_uncontrolled_components_of_a_velocity_driven_body_stay_at_rest(name):
     drive = jaxrot.Drive.imposed_velocity(jnp.array([0.0, 0.0, 2.0]), mask=jnp.array([False, False, True]))
     traj = jaxrot.rollout(
@@ -51,7 +50,7 @@ def model_with_z_set(t, q, omega, args):
     return model_torque(t, q, omega, args).at[2].set(-0.7)
 
 
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", contract_params())
 def test_imposed_moment_overrides_the_torque_model_on_that_component_only(name):
     drive = jaxrot.Drive.imposed_moment(jnp.array([0.0, 0.0, -0.7]), mask=jnp.array([False, False, True]))
     driven = jaxrot.rollout(
@@ -73,7 +72,7 @@ def test_imposed_moment_without_a_torque_model():
     np.testing.assert_allclose(driven.q, by_hand.q, atol=1e-14)
 
 
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", contract_params())
 def test_per_particle_drives_leave_free_particles_untouched(name):
     states = jaxrot.RotState(jnp.stack([TUMBLING.q] * 3), jnp.stack([TUMBLING.omega] * 3))
     drive = jaxrot.Drive(

@@ -5,7 +5,7 @@ import sys
 import jax
 import jax.numpy as jnp
 import pytest
-from helpers import scheme_params
+from helpers import contract_params
 
 import jaxrot
 from jaxrot import _blocking, _run
@@ -27,8 +27,7 @@ def compiled_memory(scheme, n_bodies, n_steps, save_every):
 
 @pytest.mark.parametrize(
     ("scheme", "blocked"),
-    [pytest.param(p.values[0], False, marks=p.marks) for p in scheme_params(sorted(jaxrot.SCHEMES))]
-    + [("zhao", True)],
+    [pytest.param(p.values[0], False, marks=p.marks) for p in contract_params()] + [("zhao", True)],
 )
 def test_memory_is_independent_of_the_number_of_steps(scheme, blocked, monkeypatch):
     if blocked:

@@ -15,13 +15,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import scheme_params
+from helpers import contract_params, scheme_params
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat, stability
 from jaxrot._elliptic import ellipk
 from jaxrot.scenes import gravity_torque
-from jaxrot.schemes import AbstractScheme, Rozmanov
+from jaxrot.schemes import AbstractScheme, Rozmanov, Splitting
 
 
 SCHEME_NAMES = list(jaxrot.SCHEMES)
@@ -36,10 +36,9 @@ TUMBLING = jaxrot.RotState(Q0, quat.rotate(Q0, jnp.asarray(stability.DEFAULT_OME
 NEEDLE = (1e-6, 1.0, 1.0)  # inertia ratio 1e6
 
 # Largest |ω|Δt with an error per step <= 1e-3 rad (jaxrot.stability's definition), measured by
-# stability.max_stable_rotation_per_step to 0.2%. "splitting" is exact for a free body: the whole
-# ladder (up to 10 rad per step) passes. On the needle the schemes that carry the angular momentum
-# (rozmanov, no_squish) turn an orientation error δθ into an error |L⊥| δθ / I₁ in the spin about the
-# needle axis, and need 10-100x smaller steps.
+# stability.max_stable_rotation_per_step to 0.2%. On the needle the schemes that carry the angular
+# momentum (rozmanov, no_squish) turn an orientation error δθ into an error |L⊥| δθ / I₁ in the spin
+# about the needle axis, and need 10-100x smaller steps.
 LIMITS = {
     ("generic", "float64"): {"zhao": 0.3449, "rozmanov": 0.3253, "euler": 0.09072, "no_squish": 0.242},
     ("generic", "float32"): {"zhao": 0.3449, "rozmanov": 0.3253, "euler": 0.09072, "no_squish": 0.242},
@@ -52,16 +51,31 @@ LIMITS[("generic", "float64")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_
 LIMITS[("generic", "float32")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
 LIMITS[("needle", "float64")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
 LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
-# The RKN splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): near-exact, up to where its
-# sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 3 / 0.6 for the largest weight 0.6).
-LIMITS[("generic", "float64")] |= {"srkn6b": 4.441, "srkn14a": 8.511}
-LIMITS[("generic", "float32")] |= {"srkn6b": 2.951, "srkn14a": 5.689}
-LIMITS[("needle", "float64")] |= {"srkn6b": 0.06918, "srkn14a": 0.1334}
-LIMITS[("needle", "float32")] |= {"srkn6b": 0.04624, "srkn14a": 0.08913}
+# The splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): near-exact, up to where its
+# sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 3 in float64, 2 in float32, over the
+# largest rotor weight: 1 for splitting, 0.6 for srkn6b), or, on the needle, up to where the modified
+# moments' cancellation passes the rotor's rounding bound (NaN beyond).
+LIMITS[("generic", "float64")] |= {"splitting": 2.692, "srkn6b": 4.441, "srkn14a": 8.511}
+LIMITS[("generic", "float32")] |= {"splitting": 1.789, "srkn6b": 2.951, "srkn14a": 5.689}
+LIMITS[("needle", "float64")] |= {"splitting": 0.04983, "srkn6b": 0.06918, "srkn14a": 0.1334}
+LIMITS[("needle", "float32")] |= {"splitting": 0.02126, "srkn6b": 0.04624, "srkn14a": 0.08913}
 # dexp⁻¹ has a pole at |Θ| = 2π: the Lie-group RK stages (|Θ_i| ≈ c_i |ω|Δt) stay finite below it,
 # and are NaN at 10 rad per step (measured finite up to 4.6 for rkmk4).
 FINITE_UP_TO = {"zhao": 3.0, "euler": 3.0, "srkn6b": 3.0, "srkn14a": 3.0}
 FINITE_UP_TO |= {"rkmk4": 3.0, "rkmk_dopri5": 3.0, "rkmk_dopri8": 3.0}
+# These are NaN soon above their accuracy limit, where the error per step is already past the
+# criterion: "splitting", whose one rotor flow a step meets the DMV rotor's 1 rad per sub-step
+# (measured NaN from 1.05x the limit); on the needle, the splittings' rotor at its rounding bound,
+# and rkmk_dopri5/8, whose stages meet the pole of dexp⁻¹ once the 1/I₁-amplified spin error
+# reaches 2π (measured: NaN from 2-4x the limit).
+NAN_ABOVE_LIMIT = {("splitting", "generic")}
+NAN_ABOVE_LIMIT |= {
+    (name, "needle") for name in ("splitting", "srkn6b", "srkn14a", "rkmk_dopri5", "rkmk_dopri8")
+}
+# The rotor's rounding bound is an estimate from the sizes of cancelling terms, whose rounding depends
+# on how the compiler orders them: the limit it sets moved by more than 5% between machines
+# (srkn6b on the needle: NaN from 1.28x the limit here, finite and accurate at 1.05x elsewhere).
+ROTOR_NEEDLE_BAND = 0.5
 BODIES = {"generic": stability.DEFAULT_MOMENTS, "needle": NEEDLE}
 # The band the error crosses 1e-3 in. Float32 on the needle is noisy: round-off in ω × Iω over
 # I₁ = 1e-6 is ~6e-2 rad/s, so the error per step wobbles by ~±30% from one |ω|Δt to the next.
@@ -73,20 +87,27 @@ LADDER = np.logspace(-12, 1, 39)
 
 @pytest.mark.parametrize("body", list(BODIES))
 @pytest.mark.parametrize("dtype", list(DTYPES))
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", scheme_params([*SCHEME_NAMES, "splitting_exact"]))
 def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
-    """No NaN and |q| = 1 over the ladder (up to where zhao is documented to blow up); the limit.
+    """No NaN and |q| = 1 over the ladder (up to where a scheme is documented to give NaN); the limit.
 
-    Measured over 8 steps: every scheme stays finite up to 3 rad per step; rozmanov, no_squish
-    and splitting up to 10; zhao's explicit ω update (gyroscopic term ~ |ω|² Δt) overflows to
-    inf, then NaN, from 3.98 (float64) and 3.16 (float32) rad per step; euler, in float32 only,
-    from 4.5 (needle) and 7.9 (generic body)."""
+    Measured over 8 steps: every scheme stays finite up to 3 rad per step on the generic body;
+    rozmanov and no_squish up to 10; zhao's explicit ω update (gyroscopic term ~ |ω|² Δt) overflows
+    to inf, then NaN, from 3.98 (float64) and 3.16 (float32) rad per step; euler, in float32 only,
+    from 4.5 (needle) and 7.9 (generic body); "splitting" (its DMV rotor) just above its limit;
+    ``Splitting(rotor="exact")`` is exact for a free body: the whole ladder passes."""
+    scheme = Splitting(rotor="exact") if name == "splitting_exact" else name
     limit = LIMITS[body, dtype].get(name)
     band = BAND.get((body, dtype), 0.05)
+    trusted = limit  # every rung below passes
+    if body == "needle" and name in ("splitting", "srkn6b", "srkn14a"):
+        band = ROTOR_NEEDLE_BAND
+        trusted = (1 - band) * limit
     around = [5.0, 10.0] if limit is None else [(1 - band) * limit, (1 + band) * limit]
     x = np.concatenate([LADDER, around])
-    result = stability.rotation_ladder(name, x, dtype=DTYPES[dtype], inertia=BODIES[body])
-    safe = x <= FINITE_UP_TO.get(name, np.inf)
+    result = stability.rotation_ladder(scheme, x, dtype=DTYPES[dtype], inertia=BODIES[body])
+    finite_up_to = trusted if (name, body) in NAN_ABOVE_LIMIT else FINITE_UP_TO.get(name, np.inf)
+    safe = x <= finite_up_to
     assert result.finite[safe].all()
     assert result.norm_error[safe].max() <= NORM_TOL[dtype]
     if name == "zhao" and body == "generic":
@@ -99,12 +120,12 @@ def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     else:
         assert below <= TOL < above
         # Every rung below the limit passes: the limit is the first crossing.
-        assert (result.error_per_step[:-2][LADDER < limit] <= TOL).all()
+        assert (result.error_per_step[:-2][LADDER < trusted] <= TOL).all()
 
 
 def test_max_stable_rotation_per_step_measures_the_table():
     assert stability.max_stable_rotation_per_step("zhao", lo=1e-3) == pytest.approx(0.3449, rel=3e-3)
-    assert stability.max_stable_rotation_per_step("splitting", lo=1e-3) == 10.0
+    assert stability.max_stable_rotation_per_step(Splitting(rotor="exact"), lo=1e-3) == 10.0
     with pytest.raises(ValueError, match="rotation_per_step"):
         stability.rotation_ladder("zhao", [-1.0])
 
@@ -183,7 +204,7 @@ def test_extreme_inertia_and_rest_are_finite_and_accurate(name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
+@pytest.mark.parametrize("name", contract_params())
 def test_gradients_through_1e4_steps_at_extreme_bodies_and_rest(name):
     """jax.grad through 10^4 steps (t = 5) w.r.t. ω₀ (also at ω₀ = 0) and the moments (also of
     exactly symmetric and spherical bodies), with a torque: finite, and the ω₀ directional
@@ -369,10 +390,15 @@ DZ_PERIOD = {
     "srkn6b": 2.5e-9,
     "srkn14a": 6e-9,
 }  # [2.8e-6, 3.9e-6, 5.8e-7, 2.0e-7, 6.0e-9, 4.2e-11, 1.2e-9, 3.0e-9]
-# Splitting steps the exact flow, so its error is round-off: sn, cn, dn at m = 1 − 2e-6 move by
+# Splitting steps a free flow exact to round-off here (|ω|Δt = 0.02; either rotor), so its error
+# is round-off; for the elliptic rotor it is largest: sn, cn, dn at m = 1 − 2e-6 move by
 # ~eps / (1 − m) when m rounds, and the 10^4 steps add that up: n eps / (1 − m) = 1.1e-6 rad; a
 # flip time moves by that over ν (relative to the 3 periods: 2.3e-8). Measured 3.4e-8 rad, 7e-10 on
 # one machine and 3.0e-7 rad, 6.3e-9 on another (a fitted 7e-8, 2e-9 failed there).
+# Dopri8's truncation at dt = 0.01 is far below round-off (measured 2.4e-9 on one machine, 8.8e-9 on
+# another): its error is the roundings of each step (~10 ulp) carried to the end by the motion's
+# sensitivity S (at most S_max per unit relative change): 10 n eps S_max bounds it.
+ROUND_OFF_LIMITED = {"rkmk_dopri8"}
 DZ_M, DZ_NU = flip_modulus(DZ_MOMENTS, DZ_OMEGA_BODY)
 DZ_ERROR["splitting"] = DZ_STEPS * EPS["float64"] / (1 - DZ_M)
 DZ_PERIOD["splitting"] = DZ_ERROR["splitting"] / (DZ_NU * 3 * flip_period(DZ_MOMENTS, DZ_OMEGA_BODY))
@@ -404,10 +430,14 @@ def test_intermediate_axis_flip(name):
     if name == "euler":
         assert error.max() > 1.0 and len(flips) > 8  # documented failure at this dt
         return
-    assert error.max() < DZ_ERROR[name]
+    bound, period_bound = DZ_ERROR[name], DZ_PERIOD[name]
+    if name in ROUND_OFF_LIMITED:
+        bound = max(bound, 10 * DZ_STEPS * EPS["float64"] * float(sensitivity.max()))
+        period_bound = max(period_bound, bound / (DZ_NU * 3 * period))  # as for splitting, below
+    assert error.max() < bound
     assert len(flips) == 4
-    assert abs((flips[-1] - flips[0]) / (3 * period) - 1) < DZ_PERIOD[name] + 3e-7
-    assert abs((flips[-1] - flips[0]) - (exact_flips[-1] - exact_flips[0])) / (3 * period) < DZ_PERIOD[name]
+    assert abs((flips[-1] - flips[0]) / (3 * period) - 1) < period_bound + 3e-7
+    assert abs((flips[-1] - flips[0]) - (exact_flips[-1] - exact_flips[0])) / (3 * period) < period_bound
 
 
 # --- long runs -----------------------------------------------------------------------------------
@@ -416,16 +446,18 @@ def test_intermediate_axis_flip(name):
 # case, and 10^5 in float64 (benchmarks/stability.py runs 10^6 of both), sampled every 1000 steps:
 # largest | |q| - 1 |, relative energy drift, relative world angular momentum drift. Bounds at about
 # twice the measured values [in brackets]. Euler's energy grows by 23% and saturates (the body
-# settles into spin about its major axis). Splitting (~10 µs per step) runs 10^5 steps in float32
-# too. Round-off only, with bounds argued from eps (the drift seen varies 2-3× by machine):
+# settles into spin about its major axis). The splittings run 10^5 steps in float32 too. Round-off
+# only, with bounds argued from eps (the drift seen varies 2-3× by machine):
 # - | |q| − 1 | after q / |q| is ≤ 2 eps, and measuring it adds ≤ 2 eps: 4 eps.
-# - splitting re-evaluates the exact flow from a rounded state: E and L move by ≤ ~10 ulp a step (the
-#   roundings of a step) and the steps add up: 10 n eps (measured 0.9-2.9 ulp a step).
+# - a splitting re-evaluates a free flow from a rounded state: E and L move by ≤ ~10 ulp a step (the
+#   roundings of a step) and the steps add up: 10 n eps (measured 0.9-2.9 ulp a step with the exact
+#   elliptic rotor, whose float32 drift was 2.9e-2 in E; the DMV rotor's is a random walk).
 # - rozmanov carries L itself: what the diagnostic sees is L rebuilt from (q, ω) through ω = R I⁻¹ Rᵀ L
 #   and back, ~2 × 13 roundings times the moment ratio (up to 3): ≤ 45 eps at any time, no drift.
 NORM = {d: 4 * EPS[d] for d in DTYPES}
 SPLIT = {d: 10 * 100_000 * EPS[d] for d in DTYPES}  # 10 ulp a step over the 10^5 steps
 L_REBUILT = {d: 45 * EPS[d] for d in DTYPES}
+WALK = {d: 10 * 100_000**0.5 * EPS[d] for d in DTYPES}
 LONG_RUN = {
     ("zhao", "float64"): (NORM["float64"], 6e-4, 3e-4),  # [2.2e-16, 2.6e-4, 1.4e-4]
     ("rozmanov", "float64"): (NORM["float64"], 4e-5, L_REBUILT["float64"]),  # [2.2e-16, 1.7e-5, 1.9e-15]
@@ -435,8 +467,11 @@ LONG_RUN = {
     ("zhao", "float32"): (NORM["float32"], 5e-3, 3e-3),  # 10^6: [8.5e-8, 2.0e-3, 1.4e-3]
     ("rozmanov", "float32"): (NORM["float32"], 1.5e-4, L_REBUILT["float32"]),  # [8.7e-8, 6.9e-5, 2.0e-6]
     ("euler", "float32"): (NORM["float32"], 0.5, 0.8),  # 10^6: [8.9e-8, 0.23, 0.38]
-    ("no_squish", "float32"): (NORM["float32"], 2e-4, 6e-4),  # 10^6: [8.4e-8, 8.1e-5, 3.0e-4]
-    ("splitting", "float32"): (NORM["float32"], SPLIT["float32"], SPLIT["float32"]),  # [2.9e-2, 1.5e-2]
+    # Energy: a random walk of round-off over the 10^6 steps, 5 sqrt(n) eps = 6e-4 (measured 8.1e-5 at
+    # XLA's -O3, 2.8e-4 at the -O0 of conftest.py on two machines: the roundings differ by level).
+    ("no_squish", "float32"): (NORM["float32"], 5 * 1000 * EPS["float32"], 6e-4),  # [8.4e-8, .., 3.0e-4]
+    # The DMV rotor's round-off is an unbiased random walk (jaxrot._rotor): 10 sqrt(n) eps over 10^5.
+    ("splitting", "float32"): (NORM["float32"], WALK["float32"], WALK["float32"]),  # [6.6e-8, 6.4e-5, 1.2e-4]
     # Lie-group RK: they carry L, unchanged by a free step; the diagnostic rebuilds it, as for rozmanov.
     # Float32 energy: round-off of 10^6 steps, at 5× the measured (the ISA moves it by up to ~1.5×).
     ("rkmk4", "float64"): (NORM["float64"], 2e-8, L_REBUILT["float64"]),  # [2.2e-16, 8.5e-9, 3.1e-15]
@@ -466,8 +501,6 @@ def test_long_run_drift(name, dtype):
     assert drift.norm < norm and drift.energy < energy and drift.momentum < momentum
     if name == "euler":
         assert drift.energy > 0.1  # explicit Euler gains energy: measured, not hidden
-    if (name, dtype) == ("splitting", "float32"):
-        assert drift.energy > 5e-3  # the documented float32 weak spot
 
 
 # --- the runtime check -------------------------------------------------------------------------

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import MOMENTS, principal_state, scheme_params
+from helpers import MOMENTS, contract_params, principal_state
 
 import jaxrot
 
@@ -115,7 +115,7 @@ def test_untyped_inputs_and_the_inertia_take_the_state_dtype():
     assert traj.q.dtype == traj.omega.dtype == traj.t.dtype == jnp.float32
 
 
-@pytest.mark.parametrize("scheme", scheme_params())
+@pytest.mark.parametrize("scheme", contract_params())
 def test_torque_of_wrong_shape_is_reported(scheme):
     with pytest.raises(ValueError, match=r"torque.*shape \(3,\)"):
         run(scheme=scheme, torque=lambda t, q, omega, args: jnp.zeros(2))

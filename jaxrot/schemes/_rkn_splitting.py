@@ -21,10 +21,9 @@ from jax.extend import core as jex_core
 from .. import quaternion as quat
 from .._inertia import body_inertia
 from .._principal_axes import principal_axes
-from .._rotor import free_rotor
 from .._state import RotState
 from ._base import AbstractScheme, world_torque
-from .splitting import SplittingCarry, _kick
+from .splitting import ROTORS, SplittingCarry, _kick, check_rotor
 
 
 def uses_omega(torque, t, q, omega, args) -> bool:
@@ -87,9 +86,12 @@ class AbstractRKNSplitting(AbstractScheme):
     torque is reused by the next step's first, so it costs ``len(kicks) − 1`` torque
     calls per step and one in `init`), ``len(rotors) = len(kicks) + 1`` an ABA
     method. Both arrays are checked when the class is defined: each sums to 1 and
-    reads the same backwards.
+    reads the same backwards. ``rotor`` picks the free-rotor flow as in
+    `jaxrot.schemes.Splitting`: ``"dmv"`` (default, fast, exact to round-off while
+    ``|ω| a_i Δt <= 0.5``) or ``"exact"`` (elliptic functions, any step, ~50× the cost).
     """
 
+    rotor: str = eqx.field(default="dmv", static=True)
     kick_weights: eqx.AbstractClassVar[tuple[float, ...]]
     rotor_weights: eqx.AbstractClassVar[tuple[float, ...]]
     kick_first: ClassVar[bool]
@@ -109,6 +111,9 @@ class AbstractRKNSplitting(AbstractScheme):
         cls.kick_first = len(kicks) > len(rotors)
         cls.torque_evals_per_step = len(kicks) - 1 if cls.kick_first else len(kicks)
         cls.torque_evals_at_init = 1 if cls.kick_first else 0
+
+    def __check_init__(self):
+        check_rotor(self)
 
     def _check_torque(self, torque, t, q, omega, args):
         if torque is not None and uses_omega(torque, t, q, omega, args):
@@ -133,7 +138,7 @@ class AbstractRKNSplitting(AbstractScheme):
         kicks, rotors = np.asarray(self.kick_weights), np.asarray(self.rotor_weights)
 
         def rotor(q_p, omega, weight):
-            return free_rotor(q_p, omega, moments, weight * dt)
+            return ROTORS[self.rotor](q_p, omega, moments, weight * dt)
 
         def kick(q_p, omega, weight, elapsed):
             tau = world_torque(torque, t + elapsed * dt, quat.multiply(q_p, to_body), omega, args)
