@@ -27,10 +27,11 @@ Measured limits (``tol = 1e-3`` rad per step, default body, float64 and float32 
 ``Splitting(rotor="exact")``, exact for a free body: the whole ladder to 10 passes). On a needle
 of inertia ratio 1e6 the schemes that carry the angular momentum need far smaller steps
 (``rozmanov`` 0.0027, ``no_squish`` 0.012; ``zhao`` 0.29, ``euler`` 0.071; ``splitting`` 0.050,
-where the DMV rotor's modified moments lose their digits and it returns NaN). Above its limit each scheme loses accuracy; ``zhao``
-also blows up (an explicit update of ``ω`` with the gyroscopic term ``ω × Iω``), to an infinity
-and then NaN within 8 steps, from 3.98 rad per step in float64 and 3.16 in float32 (``euler`` in
-float32 from 7.9); the others stay finite up to 10. Use ``rollout(..., runtime_check=True)`` to be
+where the DMV rotor's modified moments lose their digits and it returns NaN). Above its limit
+each scheme loses accuracy; ``zhao`` also blows up (an explicit update of ``ω`` with the
+gyroscopic term ``ω × Iω``), to an infinity and then NaN within 8 steps, from 3.98 rad per
+step in float64 and 3.16 in float32 (``euler`` in float32 from 7.9); the others stay finite up
+to 10. Use ``rollout(..., runtime_check=True)`` to be
 told the step.
 
 Example:
