@@ -177,6 +177,10 @@ def rotor_flows(name):
     return 1 if isinstance(scheme, Splitting) else 0
 
 
+# The schemes over the free rotor (`rotor_flows` > 0): splitting, srkn6b, srkn14a.
+ROTOR_SCHEMES = tuple(name for name in jaxrot.SCHEMES if rotor_flows(name))
+
+
 def refuses_velocity_torques(name):
     """Whether the scheme refuses a torque that depends on ω, by design (the RKN splittings)."""
     from jaxrot.schemes import AbstractRKNSplitting

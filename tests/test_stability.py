@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import contract_params, rotor_flows, scheme_params
+from helpers import ROTOR_SCHEMES, contract_params, rotor_flows, scheme_params
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat, stability
@@ -69,9 +69,7 @@ FINITE_UP_TO |= {"rkmk4": 3.0, "rkmk_dopri5": 3.0, "rkmk_dopri8": 3.0}
 # and rkmk_dopri5/8, whose stages meet the pole of dexp⁻¹ once the 1/I₁-amplified spin error
 # reaches 2π (measured: NaN from 2-4x the limit).
 NAN_ABOVE_LIMIT = {("splitting", "generic")}
-NAN_ABOVE_LIMIT |= {
-    (name, "needle") for name in ("splitting", "srkn6b", "srkn14a", "rkmk_dopri5", "rkmk_dopri8")
-}
+NAN_ABOVE_LIMIT |= {(name, "needle") for name in (*ROTOR_SCHEMES, "rkmk_dopri5", "rkmk_dopri8")}
 # The rotor's rounding bound is an estimate from the sizes of cancelling terms, whose rounding depends
 # on how the compiler orders them: the limit it sets moved by more than 5% between machines
 # (srkn6b on the needle: NaN from 1.28x the limit here, finite and accurate at 1.05x elsewhere).
@@ -100,7 +98,7 @@ def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     limit = LIMITS[body, dtype].get(name)
     band = BAND.get((body, dtype), 0.05)
     trusted = limit  # every rung below passes
-    if body == "needle" and name in ("splitting", "srkn6b", "srkn14a"):
+    if body == "needle" and name in ROTOR_SCHEMES:
         band = ROTOR_NEEDLE_BAND
         trusted = (1 - band) * limit
     around = [5.0, 10.0] if limit is None else [(1 - band) * limit, (1 + band) * limit]
@@ -496,7 +494,7 @@ LONG_RUN = {
 @pytest.mark.parametrize("name", scheme_params(SCHEME_NAMES))
 def test_long_run_drift(name, dtype):
     """Every step is also checked by runtime_check=True: no false alarm over 10^6 steps."""
-    n_steps = 1_000_000 if dtype == "float32" and name not in ("splitting", "srkn6b", "srkn14a") else 100_000
+    n_steps = 1_000_000 if dtype == "float32" and name not in ROTOR_SCHEMES else 100_000
     drift = stability.long_run_drift(name, n_steps, dtype=DTYPES[dtype], runtime_check=True)
     norm, energy, momentum = LONG_RUN[name, dtype]
     assert drift.first_nonfinite_step is None

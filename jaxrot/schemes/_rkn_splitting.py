@@ -19,11 +19,9 @@ import numpy as np
 from jax.extend import core as jex_core
 
 from .. import quaternion as quat
-from .._inertia import body_inertia
-from .._principal_axes import principal_axes
 from .._state import RotState
-from ._base import AbstractScheme, world_torque
-from .splitting import ROTORS, SplittingCarry, _kick, check_rotor
+from ._base import world_torque
+from .splitting import AbstractRotorSplitting, SplittingCarry, _kick
 
 
 def uses_omega(torque, t, q, omega, args) -> bool:
@@ -77,7 +75,7 @@ def palindrome(half, middle=()):
     return tuple(half) + tuple(middle) + tuple(reversed(half))
 
 
-class AbstractRKNSplitting(AbstractScheme):
+class AbstractRKNSplitting(AbstractRotorSplitting):
     """A palindromic kick/rotor splitting given by its coefficients.
 
     Subclasses set ``kick_weights`` ``(b_1, …)`` and ``rotor_weights`` ``(a_1, …)``
@@ -91,7 +89,6 @@ class AbstractRKNSplitting(AbstractScheme):
     ``|ω| a_i Δt <= 0.5``) or ``"exact"`` (elliptic functions, any step, ~50× the cost).
     """
 
-    rotor: str = eqx.field(default="dmv", static=True)
     kick_weights: eqx.AbstractClassVar[tuple[float, ...]]
     rotor_weights: eqx.AbstractClassVar[tuple[float, ...]]
     kick_first: ClassVar[bool]
@@ -112,9 +109,6 @@ class AbstractRKNSplitting(AbstractScheme):
         cls.torque_evals_per_step = len(kicks) - 1 if cls.kick_first else len(kicks)
         cls.torque_evals_at_init = 1 if cls.kick_first else 0
 
-    def __check_init__(self):
-        check_rotor(self)
-
     def _check_torque(self, torque, t, q, omega, args):
         if torque is not None and uses_omega(torque, t, q, omega, args):
             raise ValueError(
@@ -127,9 +121,8 @@ class AbstractRKNSplitting(AbstractScheme):
     def init(self, state, t0, inertia, torque, args):
         q, omega = state
         self._check_torque(torque, t0, q, omega, args)
-        moments, principal = principal_axes(body_inertia(inertia).tensor)
         tau = world_torque(torque, t0, q, omega, args) if torque is not None and self.kick_first else None
-        return SplittingCarry(RotState(q, omega), tau, moments, principal)
+        return self.principal_carry(state, inertia, tau)
 
     def step(self, carry, t, dt, inertia, torque, args):
         (q, omega), tau, moments, principal = carry
@@ -138,7 +131,7 @@ class AbstractRKNSplitting(AbstractScheme):
         kicks, rotors = np.asarray(self.kick_weights), np.asarray(self.rotor_weights)
 
         def rotor(q_p, omega, weight):
-            return ROTORS[self.rotor](q_p, omega, moments, weight * dt)
+            return self.flow(q_p, omega, moments, weight * dt)
 
         def kick(q_p, omega, weight, elapsed):
             tau = world_torque(torque, t + elapsed * dt, quat.multiply(q_p, to_body), omega, args)
@@ -176,9 +169,3 @@ class AbstractRKNSplitting(AbstractScheme):
         (q_p, omega, tau), _ = jax.lax.scan(pair, (q_p, omega, tau), jnp.asarray(rows, dtype))
         q1 = quat.multiply(q_p, to_body)
         return SplittingCarry(RotState(q1, omega), tau if self.kick_first else None, moments, principal)
-
-    def state(self, carry):
-        return carry.state
-
-    def with_state(self, carry, state, inertia):
-        return carry._replace(state=state)

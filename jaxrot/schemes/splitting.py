@@ -36,17 +36,41 @@ class SplittingCarry(NamedTuple):
 ROTORS = {"dmv": free_rotor, "exact": free_motion}
 
 
-def check_rotor(scheme):
-    if scheme.rotor not in ROTORS:
-        raise ValueError(f"`rotor` must be one of {sorted(ROTORS)}; got {scheme.rotor!r}.")
-
-
 def _kick(q_principal, moments, impulse):
     """World ω change from a world angular impulse ``ΔL``: ``q I⁻¹ q* ΔL``."""
     return quat.rotate(q_principal, quat.rotate(quat.conjugate(q_principal), impulse) / moments)
 
 
-class Splitting(AbstractScheme):
+class AbstractRotorSplitting(AbstractScheme):
+    """What the splittings share: the choice of free rotor and a `SplittingCarry` in the principal frame.
+
+    ``rotor`` (static): ``"dmv"`` (`jaxrot._rotor.free_rotor`) or ``"exact"``
+    (`jaxrot.analytic.free_motion`); see `Splitting` for their ranges and costs.
+    """
+
+    rotor: str = eqx.field(default="dmv", static=True)
+
+    def __check_init__(self):
+        if self.rotor not in ROTORS:
+            raise ValueError(f"`rotor` must be one of {sorted(ROTORS)}; got {self.rotor!r}.")
+
+    def flow(self, q_principal, omega, moments, t):
+        """Torque-free motion over ``t`` by the chosen rotor: ``(q_principal(t), omega(t))``."""
+        return ROTORS[self.rotor](q_principal, omega, moments, t)
+
+    def principal_carry(self, state, inertia, tau):
+        """The first carry: ``state``, the torque ``tau`` to reuse (or None) and the principal frame."""
+        moments, principal = principal_axes(body_inertia(inertia).tensor)
+        return SplittingCarry(RotState(*state), tau, moments, principal)
+
+    def state(self, carry):
+        return carry.state
+
+    def with_state(self, carry, state, inertia):
+        return carry._replace(state=state)
+
+
+class Splitting(AbstractRotorSplitting):
     r"""Kick–rotate–kick Strang splitting over the free rigid body; order 2, one torque call per step.
 
     One step from ``(q0, ω0)`` at time ``t``, with ``τ0`` the torque carried from
@@ -105,22 +129,14 @@ class Splitting(AbstractScheme):
         True
     """
 
-    rotor: str = eqx.field(default="dmv", static=True)
-
     name: ClassVar[str] = "splitting"
     order: ClassVar[int] = 2
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
 
-    def __check_init__(self):
-        check_rotor(self)
-
     def init(self, state, t0, inertia, torque, args):
-        inertia = body_inertia(inertia)
-        q, omega = state
-        moments, principal = principal_axes(inertia.tensor)
-        tau = None if torque is None else world_torque(torque, t0, q, omega, args)
-        return SplittingCarry(RotState(q, omega), tau, moments, principal)
+        tau = None if torque is None else world_torque(torque, t0, *state, args)
+        return self.principal_carry(state, inertia, tau)
 
     def step(self, carry, t, dt, inertia, torque, args):
         (q, omega), tau, moments, principal = carry
@@ -128,7 +144,7 @@ class Splitting(AbstractScheme):
         q_p = quat.multiply(q, principal)
         if torque is not None:
             omega = omega + _kick(q_p, moments, half * tau)
-        q_p1, omega1 = ROTORS[self.rotor](q_p, omega, moments, dt)
+        q_p1, omega1 = self.flow(q_p, omega, moments, dt)
         q1 = quat.multiply(q_p1, quat.conjugate(principal))
         tau1 = None
         if torque is not None:
@@ -136,9 +152,3 @@ class Splitting(AbstractScheme):
             tau1 = world_torque(torque, t + dt, q1, omega_pred, args)
             omega1 = omega1 + _kick(q_p1, moments, half * tau1)
         return SplittingCarry(RotState(q1, omega1), tau1, moments, principal)
-
-    def state(self, carry):
-        return carry.state
-
-    def with_state(self, carry, state, inertia):
-        return carry._replace(state=state)
