@@ -72,25 +72,24 @@ def gravity_args(offset_principal=(0.1, 0.05, 0.3), r=None):
 
 
 def order_errors(scheme, state, inertia, t_end, coarse_steps, levels, torque=None, args=None):
-    """(dts, max orientation errors) over a halving ladder, against a 1e-13 reference."""
+    """(dts, max orientation errors at the coarse times) over a halving ladder, against a 1e-13 reference.
+
+    Every rung runs through one compiled ``advance`` (`fixed_step_advance`): one compilation for the
+    ladder instead of one `jaxrot.rollout` per rung."""
     dt0 = t_end / coarse_steps
     ts = jnp.arange(coarse_steps + 1, dtype=jnp.float64) * dt0
     ref = jaxrot.reference_rollout(state, inertia, ts, torque=torque, args=args, rtol=1e-13, atol=1e-13)
+    init, advance, to_state = fixed_step_advance(scheme, inertia, torque, args)
     dts, errors = [], []
     for k in range(levels):
         factor = 2**k
-        traj = jaxrot.rollout(
-            scheme,
-            state,
-            inertia,
-            dt0 / factor,
-            coarse_steps * factor,
-            torque=torque,
-            args=args,
-            save_every=factor,
-        )
-        dts.append(dt0 / factor)
-        errors.append(float(jnp.max(quat.angle_between(traj.q, ref.q))))
+        dt = dt0 / factor
+        carry, qs = init(state), [state.q]
+        for j in range(coarse_steps):
+            carry = advance(carry, j * factor, dt, factor)
+            qs.append(to_state(carry).q)
+        dts.append(dt)
+        errors.append(float(jnp.max(quat.angle_between(jnp.stack(qs), ref.q))))
     return np.array(dts), np.array(errors)
 
 
@@ -120,23 +119,48 @@ def central_difference_grad(f, primals, argnum, rel_step=1e-4):
     return jnp.stack(grad).reshape(x.shape)
 
 
-def fixed_step_runner(scheme, inertia, torque=None, args=None):
-    """``run(state, dt, n) -> RotState`` after ``n`` steps of one body, one compilation for any dt, n.
-
-    The scheme's own ``init``/``step``/``state`` in a ``fori_loop`` with a runtime trip count, so an
-    order ladder costs one compilation instead of one per rung (`jaxrot.rollout` fixes ``n_steps``
-    at trace time; its equivalence to these methods is tested for every scheme elsewhere).
-    """
+def fixed_step_advance(scheme, inertia, torque=None, args=None):
+    """``(init, advance, state)`` for one body: the scheme's own ``init``/``step``/``state``, with
+    ``advance(carry, first_step, dt, n)`` taking ``n`` steps from step number ``first_step`` (time
+    ``first_step · dt``) in a ``fori_loop`` with a runtime trip count, so any dt and n share one
+    compilation (`jaxrot.rollout` fixes ``n_steps`` at trace time; its equivalence to these methods is
+    tested for every scheme elsewhere)."""
     scheme = jaxrot.schemes.resolve_scheme(scheme)
     inertia = jaxrot.body_inertia(inertia)
 
-    @jax.jit
-    def run(state, dt, n):
-        carry = scheme.init(state, jnp.zeros((), state.q.dtype), inertia, torque, args)
-        step = lambda i, c: scheme.step(c, i.astype(dt.dtype) * dt, dt, inertia, torque, args)
-        return scheme.state(jax.lax.fori_loop(0, n, step, carry))
+    def init(state):
+        return scheme.init(state, jnp.zeros((), state.q.dtype), inertia, torque, args)
 
-    return lambda state, dt, n: run(state, jnp.asarray(dt, state.q.dtype), n)
+    @jax.jit
+    def advance(carry, first_step, dt, n):
+        def step(i, c):
+            return scheme.step(c, (first_step + i).astype(dt.dtype) * dt, dt, inertia, torque, args)
+
+        return jax.lax.fori_loop(0, n, step, carry)
+
+    def run(carry, first_step, dt, n):
+        dtype = scheme.state(carry).q.dtype
+        return advance(carry, jnp.asarray(first_step), jnp.asarray(dt, dtype), n)
+
+    return init, run, scheme.state
+
+
+def compiled_for_a_long_run(fn, *example_args):
+    """``jax.jit(fn)`` compiled for ``example_args`` at XLA's default optimisation level.
+
+    conftest.py runs the suite at LLVM -O0 (compiling dominates most tests); a program that then runs
+    for 10⁴ steps pays for that instead: jax.grad through 1000 splitting steps ran 11.6 s at -O0 and
+    0.46 s at the default level, for 4 s more compilation (2-core EPYC, jax 0.10.2). The level changes
+    rounding (fused multiply-adds), not what is computed."""
+    lowered = jax.jit(fn).lower(*example_args)
+    return lowered.compile(compiler_options={"xla_backend_optimization_level": 2})
+
+
+def fixed_step_runner(scheme, inertia, torque=None, args=None):
+    """``run(state, dt, n) -> RotState`` after ``n`` steps of one body, one compilation for any dt, n
+    (`fixed_step_advance` from the start)."""
+    init, advance, to_state = fixed_step_advance(scheme, inertia, torque, args)
+    return lambda state, dt, n: to_state(advance(init(state), 0, dt, n))
 
 
 # Generic contract tests (batching, blocking, chunks, sharding, drives, scenes, extremes) run on
