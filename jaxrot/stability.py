@@ -30,9 +30,9 @@ of inertia ratio 1e6 the schemes that carry the angular momentum need far smalle
 where the DMV rotor's modified moments lose their digits and it returns NaN). Above its limit
 each scheme loses accuracy; ``zhao`` also blows up (an explicit update of ``ω`` with the
 gyroscopic term ``ω × Iω``), to an infinity and then NaN within 8 steps, from 3.98 rad per
-step in float64 and 3.16 in float32 (``euler`` in float32 from 7.9); the others stay finite up
-to 10. Use ``rollout(..., runtime_check=True)`` to be
-told the step.
+step in float64 and 3.16 in float32 (``euler`` in float32 from 7.9); ``rozmanov`` and
+``no_squish`` stay finite up to 10, every other scheme up to 3 (``splitting`` up to its limit).
+Use ``rollout(..., runtime_check=True)`` to be told the step.
 
 Example:
     >>> from jaxrot import stability

@@ -181,9 +181,10 @@ def test_gradient_through_adaptive_solve_matches_central_differences():
     np.testing.assert_allclose(grad, fd, rtol=0, atol=1e-5)
 
 
-def _final_q(state, adjoint=None):
+def _final_q(state, adjoint=None, name="rkmk_dopri8", max_steps=64):
+    """q at t = 0.5 of an adaptive solve under drag; diffeqsolve raises if ``max_steps`` is too few."""
     sol = _solve(
-        "rkmk_dopri8", state, MOMENTS, _drag_torque, 0.5, None, stepsize_controller=_pid(1e-8), max_steps=64,
+        name, state, MOMENTS, _drag_torque, 0.5, None, stepsize_controller=_pid(1e-8), max_steps=max_steps,
         **({} if adjoint is None else {"adjoint": adjoint}),
     )  # fmt: skip
     return sol.ys.q[-1]
@@ -214,14 +215,8 @@ def test_direct_adjoint_gives_the_default_adjoints_gradient():
     weights = jnp.array([0.3, -0.7, 0.2, 0.5])
 
     def grad(adjoint):
-        def loss(omega):
-            sol = _solve(
-                "rkmk_dopri5", jaxrot.RotState(STATE.q, omega), MOMENTS, _drag_torque, 0.5, None,
-                stepsize_controller=_pid(1e-8), max_steps=8, adjoint=adjoint,
-            )  # fmt: skip
-            assert int(sol.stats["num_steps"]) < 8
-            return jnp.sum(sol.ys.q[-1] * weights)
-
+        # The solve takes 5 steps; DirectAdjoint's program grows with max_steps.
+        loss = lambda w: jnp.sum(_final_q(jaxrot.RotState(STATE.q, w), adjoint, "rkmk_dopri5", 8) * weights)
         return jax.grad(loss)(STATE.omega)
 
     np.testing.assert_allclose(
