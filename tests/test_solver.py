@@ -181,12 +181,11 @@ def test_gradient_through_adaptive_solve_matches_central_differences():
     np.testing.assert_allclose(grad, fd, rtol=0, atol=1e-5)
 
 
-def _final_q(state, adjoint=None, name="rkmk_dopri8", max_steps=64):
-    """q at t = 0.5 of an adaptive solve under drag; diffeqsolve raises if ``max_steps`` is too few."""
+def _final_q(state):
+    """q at t = 0.5 of an adaptive rkmk_dopri8 solve under drag."""
     sol = _solve(
-        name, state, MOMENTS, _drag_torque, 0.5, None, stepsize_controller=_pid(1e-8), max_steps=max_steps,
-        **({} if adjoint is None else {"adjoint": adjoint}),
-    )  # fmt: skip
+        "rkmk_dopri8", state, MOMENTS, _drag_torque, 0.5, None, stepsize_controller=_pid(1e-8), max_steps=64
+    )
     return sol.ys.q[-1]
 
 
@@ -208,20 +207,34 @@ def test_vmap_over_bodies_equals_one_solve_each():
 
 @pytest.mark.slow
 def test_direct_adjoint_gives_the_default_adjoints_gradient():
-    """`DirectAdjoint` and `RecursiveCheckpointAdjoint` differentiate the same steps: same gradient.
+    """`DirectAdjoint` and `RecursiveCheckpointAdjoint` give the same gradient, to the solve's tolerance.
 
+    On fixed steps the two reverse passes do the same arithmetic in a different order: agreement to
+    1e-14 (~50 ulp on gradients of size ~0.2; measured 1.4e-16). Under the PID controller the default
+    adjoint also differentiates the step-size choice and DirectAdjoint does not (its gradient equals
+    the one through the same steps held fixed, to 3e-17, measured): that path moves the result only
+    through the truncation error, which the controller holds near ``tol``, so the two agree to
+    ``tol`` (measured 4.5e-11 at tol = 1e-8; 1e-12, asserted before, held on one machine only).
     One gradient of a weighted sum of the final q (one reverse pass) on the FSAL pair: the Jacobian
     through rkmk_dopri8 (four reverse passes, each traced anew) made this a 230 s test."""
     weights = jnp.array([0.3, -0.7, 0.2, 0.5])
+    tol = 1e-8
 
-    def grad(adjoint):
-        # The solve takes 5 steps; DirectAdjoint's program grows with max_steps.
-        loss = lambda w: jnp.sum(_final_q(jaxrot.RotState(STATE.q, w), adjoint, "rkmk_dopri5", 8) * weights)
+    def grad(adjoint, controller, dt0):
+        def loss(w):
+            sol = _solve(
+                "rkmk_dopri5", jaxrot.RotState(STATE.q, w), MOMENTS, _drag_torque, 0.5, dt0,
+                stepsize_controller=controller, max_steps=8, adjoint=adjoint,
+            )  # fmt: skip  # 5 steps either way; DirectAdjoint's program grows with max_steps
+            return jnp.sum(sol.ys.q[-1] * weights)
+
         return jax.grad(loss)(STATE.omega)
 
-    np.testing.assert_allclose(
-        grad(diffrax.RecursiveCheckpointAdjoint()), grad(diffrax.DirectAdjoint()), rtol=0, atol=1e-12
-    )
+    for controller, dt0, atol in ((diffrax.ConstantStepSize(), 0.1, 1e-14), (_pid(tol), None, tol)):
+        default = grad(diffrax.RecursiveCheckpointAdjoint(), controller, dt0)
+        direct = grad(diffrax.DirectAdjoint(), controller, dt0)
+        assert float(jnp.linalg.norm(default)) > 0.1
+        np.testing.assert_allclose(default, direct, rtol=0, atol=atol)
 
 
 @pytest.mark.slow
