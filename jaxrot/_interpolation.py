@@ -1,7 +1,8 @@
 """Dense output on the rotation group for the solvers of `jaxrot.solver`.
 
 Within a step from ``(q0, L0)`` at ``t0`` to ``(q1, L1)`` at ``t1`` the orientation is
-``q(t) = exp(Θ(t)) ⊗ q0`` with ``Θ`` interpolated in the Lie algebra so(3) ≅ R³
+``q(t) = ψ(Θ(t)) ⊗ q0`` (``ψ`` the exponential, or the Cayley map of the RKMK schemes)
+with ``Θ`` interpolated in the Lie algebra so(3) ≅ R³
 (``Θ(t0) = 0``, ``Θ(t1) = Θ1``), so every interpolated ``q`` is a unit quaternion;
 the world angular momentum ``L(t)`` is interpolated in R³ and
 ``ω(t) = R(t) I⁻¹ R(t)ᵀ L(t)``. Two interpolants of ``(Θ, L)``:
@@ -17,6 +18,7 @@ the world angular momentum ``L(t)`` is interpolated in R³ and
 """
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -33,6 +35,8 @@ class GroupInterpolation(diffrax.AbstractLocalInterpolation):
         rotation: interpolant of the rotation vector ``Θ(t)`` ``(..., 3)``, zero at ``t0``.
         momentum: interpolant of the world angular momentum ``L(t)`` ``(..., 3)``.
         inverse_inertia: body-frame ``I⁻¹`` as ``(..., 3, 3)`` matrices.
+        chart: ``"exp"`` or ``"cayley"``: the map from ``Θ`` to the rotation, the one
+            the step's ``Θ`` was built for (`jaxrot.schemes.AbstractLieRungeKutta.chart`).
     """
 
     t0: jax.Array
@@ -41,12 +45,14 @@ class GroupInterpolation(diffrax.AbstractLocalInterpolation):
     rotation: diffrax.AbstractLocalInterpolation
     momentum: diffrax.AbstractLocalInterpolation
     inverse_inertia: jax.Array
+    chart: str = eqx.field(default="exp", static=True)
 
     def evaluate(self, t0, t1=None, left=True):
         del left
         if t1 is not None:  # an increment; a difference of two states is all diffrax asks for
             return jax.tree_util.tree_map(lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0))
-        q = quat.normalize(quat.multiply(quat.exp(self.rotation.evaluate(t0)), self.q0))
+        chart = quat.cayley if self.chart == "cayley" else quat.exp
+        q = quat.normalize(quat.multiply(chart(self.rotation.evaluate(t0)), self.q0))
         momentum_body = quat.rotate(quat.conjugate(q), self.momentum.evaluate(t0))
         omega_body = jnp.einsum("...ij,...j->...i", self.inverse_inertia, momentum_body)
         return RotState(q, quat.rotate(q, omega_body))
@@ -76,12 +82,14 @@ def stage_interpolation(
     momentum1,
     momentum_stages,
     inverse_inertia,
+    chart="exp",
 ):
     """`GroupInterpolation` from a Runge–Kutta pair's own continuous extension, applied in the algebra.
 
     ``algebra_interpolation`` is the diffrax solver's ``interpolation_cls`` (e.g.
     ``diffrax.Dopri5.interpolation_cls``); ``theta_stages`` and ``momentum_stages``
-    ``(s, ..., 3)`` are the step's stage increments ``h K_i`` and ``h T_i``."""
+    ``(s, ..., 3)`` are the step's stage increments ``h K_i`` and ``h T_i``, in the
+    scheme's ``chart``."""
     rotation = algebra_interpolation(t0=t0, t1=t1, y0=jnp.zeros_like(theta1), y1=theta1, k=theta_stages)
     momentum = algebra_interpolation(t0=t0, t1=t1, y0=momentum0, y1=momentum1, k=momentum_stages)
-    return GroupInterpolation(t0, t1, q0, rotation, momentum, inverse_inertia)
+    return GroupInterpolation(t0, t1, q0, rotation, momentum, inverse_inertia, chart)

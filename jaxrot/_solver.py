@@ -121,7 +121,7 @@ class AdaptiveLieSolver(SchemeSolver, diffrax.AbstractAdaptiveSolver):
 
     Works with `diffrax.PIDController`. The error estimate is the difference of the
     pair's two solutions, both computed on the group: ``y_error = (q1 − q̂1, ω1 − ω̂1)``
-    with ``q̂1 = exp(h Σ b̂_j K_j) ⊗ q0`` and ``L̂1 = L0 + h Σ b̂_j T_j`` — the same
+    with ``q̂1 = ψ(h Σ b̂_j K_j) ⊗ q0`` (``ψ`` the scheme's chart) and ``L̂1 = L0 + h Σ b̂_j T_j`` — the same
     quantities a Euclidean solver's controller sees, so ``rtol``/``atol`` mean the
     same as for `diffrax.Tsit5` on a `jaxrot.RigidBodyTerm`. The last stage of a
     first-same-as-last tableau is reused as the next step's first torque.
@@ -138,7 +138,7 @@ class AdaptiveLieSolver(SchemeSolver, diffrax.AbstractAdaptiveSolver):
         algebra = self.scheme.dense_output
 
         def build(**info):
-            return stage_interpolation(algebra, **info)
+            return stage_interpolation(algebra, chart=self.scheme.chart, **info)
 
         return build
 

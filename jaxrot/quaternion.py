@@ -22,6 +22,7 @@ Example:
     [0.0, 1.0, 0.0]
 """
 
+import jax
 import jax.numpy as jnp
 
 from ._math import safe_norm, taylor_threshold
@@ -126,6 +127,24 @@ def exp(rotvec):
     real = jnp.where(use_taylor, 1 - theta_sq / 8 + theta_sq**2 / 384, cos_half)
     imag_factor = jnp.where(use_taylor, 0.5 - theta_sq / 48 + theta_sq**2 / 3840, sin_half / theta)
     return jnp.concatenate([real, imag_factor * rotvec], axis=-1)
+
+
+def cayley(rotvec):
+    """Unit quaternion of the Cayley map of ``rotvec`` ``(..., 3)``: ``(1, v/2) / √(1 + |v|²/4)``.
+
+    The rotation ``(I − v̂/2)⁻¹ (I + v̂/2)``: about ``v`` by ``2 atan(|v|/2)``, equal to
+    `exp` to second order (``cayley(v) = exp(v) + O(|v|³)``). No trigonometry and no
+    branch: value and gradient are exact and finite everywhere, ``v = 0`` included. The
+    chart of jaxrot's Lie-group Runge–Kutta schemes (`jaxrot.schemes.AbstractLieRungeKutta`).
+
+    Example:
+        >>> import jax.numpy as jnp
+        >>> cayley(jnp.array([0.0, 0.0, 2.0])).tolist()  # 90° about z
+        [0.7071067811865475, 0.0, 0.0, 0.7071067811865475]
+    """
+    half = 0.5 * rotvec
+    scale = jax.lax.rsqrt(1 + jnp.sum(half * half, axis=-1, keepdims=True))
+    return jnp.concatenate([scale, scale * half], axis=-1)
 
 
 def log(q):
