@@ -1,20 +1,20 @@
 """The speed/accuracy race: every jaxrot scheme against diffrax's Tsit5, Dopri5 and Dopri8.
 
 For each scene, ``N`` bodies (default 1000) get random orientations and random
-body-frame spins (each component normal with standard deviation 3 rad/s) and
-keep the scene's inertia, torque and horizon. Every scheme in `jaxrot.SCHEMES`
-runs on a ladder of step counts growing by √2 (from 8 steps over the horizon
-until the error is below ``--floor``, stops falling, or a run takes longer than
-``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and Dopri8 run on the same
-`Euclidean` quaternion ODE as `jaxrot.reference_rollout` (normalised at the end)
-with a PID controller at rtol = atol on a half-decade ladder 1e-2 … 1e-13, and so do
-jaxrot's Lie-group pairs rkmk_dopri5 and rkmk_dopri8 as diffrax solvers
-(`jaxrot.solver`, rows ``jaxrot_*_pid``, each body adapting its own steps). The
-error of a row is the largest geodesic orientation error over all bodies at the
-final time against Dopri8 at rtol = atol = 1e-14 in float64, solving the problem the
-row was given (in float32: the rounded initial state and scene, cast up). Each row is one
-compiled program (step count and tolerance are runtime values, so each method
-compiles once) timed as the median of ``--repeats`` runs of the whole batch.
+body-frame spins (each component normal with standard deviation 3 rad/s) and keep the
+scene's inertia, torque and horizon. Every scheme in `jaxrot.SCHEMES`, and the variants
+in ``VARIANTS`` (rkmk_dopri8 with the Cayley chart), runs on a ladder of step counts
+growing by √2 (from 8 steps over the horizon until the error is below ``--floor``, stops
+falling, or a run takes longer than ``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and
+Dopri8 run on the same `Euclidean` quaternion ODE as `jaxrot.reference_rollout`
+(normalised at the end) with a PID controller at rtol = atol on a half-decade ladder
+1e-2 … 1e-13, and so do jaxrot's Lie-group pairs rkmk_dopri5 and rkmk_dopri8 as diffrax
+solvers (`jaxrot.solver`, rows ``jaxrot_*_pid``, each body adapting its own steps). The
+error of a row is the largest geodesic orientation error over all bodies at the final
+time against Dopri8 at rtol = atol = 1e-14 in float64, solving the problem the row was
+given (in float32: the rounded initial state and scene, cast up). Each row is one
+compiled program (step count and tolerance are runtime values, so each method compiles
+once) timed as the median of ``--repeats`` runs of the whole batch.
 
 The table gives, for each budget 1e-2 … 1e-10 rad (1e-2 … 1e-5 in float32), the
 fastest jaxrot row and the fastest diffrax row meeting it and their ratio
@@ -51,6 +51,8 @@ from jaxrot.comparison import machine_info, plot_work_precision
 DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_dopri5": diffrax.Dopri5, "diffrax_dopri8": diffrax.Dopri8}
 # jaxrot's Lie-group pairs with diffrax's PID controller (`jaxrot.solver`): each body adapts its own steps.
 LIE_ADAPTIVE = ("rkmk_dopri5", "rkmk_dopri8")
+# Fixed-step variants of registered schemes, raced as rows of their own.
+VARIANTS = {"rkmk_dopri8_cayley": jaxrot.schemes.RKMKDopri8(chart="cayley")}
 BUDGETS = {"float64": [10.0**-k for k in range(2, 11)], "float32": [10.0**-k for k in range(2, 6)]}
 REFERENCE_TOL = 1e-14
 
@@ -160,8 +162,9 @@ def race(
     q_ref = ref.q[-1]
     rows = []
     common = {"scene": scene_name, "dtype": dtype, "particles": n}
-    for name in schemes or list(jaxrot.SCHEMES):
-        scheme = jaxrot.SCHEMES[name]
+    candidates = {**jaxrot.SCHEMES, **VARIANTS}
+    for name in schemes or list(candidates):
+        scheme = candidates[name]
         try:
             runner = fixed_step_runner(scheme, scene)
             start = time.perf_counter()
