@@ -99,7 +99,8 @@ def cayley_and_dcayinv(theta, w):
 
 def _cayley_and_coefficient(theta):
     """``cay(Θ)`` ``(4,)`` and ``|Θ|²/4``, which `_dcayinv` reuses."""
-    return cayley(theta), 0.25 * jnp.sum(theta * theta)
+    half = 0.5 * theta  # |Θ/2|², the expression `cayley` computes: XLA merges the two
+    return cayley(theta), jnp.sum(half * half)
 
 
 def _dcayinv(theta, quarter_sq, w):
@@ -231,8 +232,8 @@ class AbstractLieRungeKutta(AbstractScheme):
     def stages(self, carry, t, dt, inertia, torque, args, n_stages, first_torque=None):
         """The first ``n_stages`` stage slopes ``(K_i, T_i)`` of a step, as two lists of ``(3,)``.
 
-        ``K_i`` is the stage's rotation-vector rate (``dexp⁻¹_{Θ_i}(ω_i)``, world, rad / time)
-        and ``T_i`` its world torque (an empty list when torque-free). ``first_torque``, when
+        ``K_i`` is the stage's rotation-vector rate (``dψ⁻¹_{Θ_i}(ω_i)`` in the ``chart`` ψ, world,
+        rad / time) and ``T_i`` its world torque (an empty list when torque-free). ``first_torque``, when
         given, is used as ``T_1`` instead of calling the torque: the last stage of a
         first-same-as-last tableau, reused by the adaptive solver."""
         inertia = body_inertia(inertia)
@@ -260,7 +261,7 @@ class AbstractLieRungeKutta(AbstractScheme):
         return ks, taus
 
     def combine(self, carry, dt, inertia, ks, taus, weights) -> LieRungeKuttaCarry:
-        """The carry ``exp(h Σ w_j K_j) ⊗ q_n``, ``L_n + h Σ w_j T_j`` for stage slopes ``ks``, ``taus``."""
+        """The carry ``ψ(h Σ w_j K_j) ⊗ q_n``, ``L_n + h Σ w_j T_j`` for stage slopes ``ks``, ``taus``."""
         (q0, _), momentum0 = carry
         step_rotation, _ = CHARTS[self.chart][0](_combination(dt, weights, ks))
         q1 = stage(normalize(multiply(step_rotation, q0)))
