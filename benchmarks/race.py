@@ -4,8 +4,9 @@ For each scene, ``N`` bodies (default 1000) get random orientations and random
 body-frame spins (each component normal with standard deviation 3 rad/s) and keep the
 scene's inertia, torque and horizon. Every scheme in `jaxrot.SCHEMES`, and the variants
 in ``VARIANTS`` (rkmk_dopri8 with the Cayley chart), runs on a ladder of step counts
-growing by √2 (from 8 steps over the horizon until the error is below ``--floor``, stops
-falling, or a run takes longer than ``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and
+growing by 10^(1/(2·order)), at most √2 (`step_ladder`: half a decade of error per rung, as
+diffrax's half-decade tolerance ladder; from 8 steps over the horizon until the error is below
+``--floor``, stops falling, or a run takes longer than ``--time-cap`` seconds); diffrax's Tsit5, Dopri5 and
 Dopri8 run on the same `Euclidean` quaternion ODE as `jaxrot.reference_rollout`
 (normalised at the end) with a PID controller at rtol = atol on a half-decade ladder
 1e-2 … 1e-13, and so do jaxrot's Lie-group pairs rkmk_dopri5 and rkmk_dopri8 as diffrax
@@ -14,7 +15,10 @@ error of a row is the largest geodesic orientation error over all bodies at the 
 time against Dopri8 at rtol = atol = 1e-14 in float64, solving the problem the row was
 given (in float32: the rounded initial state and scene, cast up). Each row is one
 compiled program (step count and tolerance are runtime values, so each method compiles
-once) timed as the median of ``--repeats`` runs of the whole batch.
+once) timed as the median of ``--repeats`` runs of the whole batch. Then the rows that can win a
+budget (`finalists`: the three fastest methods of each side at each budget) are timed again
+round-robin, seven rounds, and keep those medians (`retime_side_by_side`): both sides of a ratio
+are measured in the same minute, not minutes apart.
 
 The table gives, for each budget 1e-2 … 1e-10 rad (1e-2 … 1e-5 in float32), the
 fastest jaxrot row and the fastest diffrax row meeting it and their ratio
@@ -53,6 +57,8 @@ DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_dopri5": diffrax.Dopri5, "di
 LIE_ADAPTIVE = ("rkmk_dopri5", "rkmk_dopri8")
 # Fixed-step variants of registered schemes, raced as rows of their own.
 VARIANTS = {"rkmk_dopri8_cayley": jaxrot.schemes.RKMKDopri8(chart="cayley")}
+# A row's key for the compiled program and arguments that reproduce its run (not saved).
+RERUN = "_rerun"
 BUDGETS = {"float64": [10.0**-k for k in range(2, 11)], "float32": [10.0**-k for k in range(2, 6)]}
 REFERENCE_TOL = 1e-14
 
@@ -63,6 +69,23 @@ def random_bodies(scene, n, dtype, seed=0):
     q = quat.normalize(jax.random.normal(key_q, (n, 4), dtype=jnp.float64))
     omega_body = 3.0 * jax.random.normal(key_w, (n, 3), dtype=jnp.float64)
     return jaxrot.RotState(q.astype(dtype), quat.rotate(q, omega_body).astype(dtype))
+
+
+def step_ladder(order, start=8, stop=10**6):
+    """Step counts from ``start`` growing by ``min(√2, 10^(1/(2·order)))``, each a distinct integer.
+
+    diffrax's rows step through tolerances half a decade apart, and their errors follow the
+    tolerance; a fixed-step scheme of order p moves its error by half a decade when its step count
+    grows by 10^(1/(2p)) (1.15 at order 8). Both sides of the race then sample their work-precision
+    curves equally finely, so a budget picks neither side's row from a coarser grid (on a √2 ladder
+    an order-8 scheme's errors are 1.2 decades apart). Orders below 3 keep √2.
+    """
+    growth = min(math.sqrt(2.0), 10.0 ** (1.0 / (2.0 * order)))
+    steps, k = start, 0
+    while steps <= stop:
+        yield steps
+        k += 1
+        steps = max(steps + 1, int(round(start * growth**k)))
 
 
 def timed(compiled, *args, repeats):
@@ -173,9 +196,8 @@ def race(
             log(f"  {name}: skipped ({str(err).split('.')[0]})")
             continue
         compile_s = time.perf_counter() - start
-        errors, k = [], 0
-        while True:
-            steps = int(round(8 * 2 ** (k / 2)))
+        errors, steps = [], 0
+        for steps in step_ladder(scheme.order):
             dt = t_end / steps
             out, seconds = timed(compiled, state, jnp.asarray(dt, dtype_), steps, repeats=repeats)
             err = error_of(out.q, q_ref)
@@ -187,13 +209,13 @@ def race(
             rows.append(
                 {**common, "method": name, "kind": "fixed", "dt": dt, "tol": None, "n_steps": steps,
                  "max_orientation_error_rad": err, "torque_evals": evals, "seconds": seconds,
-                 "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s}
+                 "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s,
+                 RERUN: (compiled, (state, jnp.asarray(dt, dtype_), steps))}
             )  # fmt: skip
             log(f"  {name:12s} steps {steps:7d}  err {err:9.2e}  {seconds * 1e3:9.2f} ms")
             errors.append(err)
-            k += 1
             stalled = len(errors) >= 3 and errors[-1] > 0.7 * errors[-3] and errors[-1] < 1e-3
-            if err < floor or seconds > time_cap or stalled or not math.isfinite(err) and k > 20:
+            if err < floor or seconds > time_cap or stalled or not math.isfinite(err) and steps > 8000:
                 break
     adaptive = [(name, adaptive_runner(solver, scene, t_end), solver) for name, solver in DIFFRAX.items()]
     adaptive += [
@@ -219,11 +241,52 @@ def race(
             rows.append(
                 {**common, "method": name, "kind": "adaptive", "dt": None, "tol": tol,
                  "n_steps": int(round(mean_steps)), "max_orientation_error_rad": err, "torque_evals": evals,
-                 "seconds": seconds, "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s}
+                 "seconds": seconds, "us_per_particle_run": seconds / n * 1e6, "compile_s": compile_s,
+                 RERUN: (compiled, (state, jnp.asarray(tol, dtype_)))}
             )  # fmt: skip
             log(f"  {name:15s} tol {tol:8.1e} steps {mean_steps:8.1f} err {err:9.2e} {seconds * 1e3:9.2f} ms")
             if err < floor or seconds > 4 * time_cap:
                 break
+    return rows
+
+
+def finalists(rows, budgets, per_side=3):
+    """The rows that can win a budget: for each budget and side (jaxrot, diffrax), the cheapest row of
+    each of the ``per_side`` methods whose cheapest row meeting it was fastest on the ladder."""
+    chosen = {}
+    for budget in budgets:
+        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        for side in (True, False):
+            best = {}
+            for r in ok:
+                current = best.get(r["method"])
+                if _is_diffrax(r) == side and (current is None or r["seconds"] < current["seconds"]):
+                    best[r["method"]] = r
+            for r in sorted(best.values(), key=lambda r: r["seconds"])[:per_side]:
+                chosen[id(r)] = r
+    return list(chosen.values())
+
+
+def retime_side_by_side(rows, budgets, rounds=7, log=print):
+    """Time the `finalists` again, round-robin: each round runs every finalist once, in turn.
+
+    A ladder times each method minutes after the others; load on the machine drifts over that span
+    (the same compiled rkmk_dopri8 step measured 1.5x apart in two runs of the race). Interleaved,
+    both sides of a ratio see the same drift. Each finalist's ``seconds`` becomes the median of its
+    ``rounds`` runs; the ladder's figure stays as ``ladder_seconds``."""
+    final = finalists(rows, budgets)
+    samples = {id(r): [] for r in final}
+    for _ in range(rounds):
+        for r in final:
+            compiled, args = r[RERUN]
+            start = time.perf_counter()
+            jax.block_until_ready(compiled(*args))
+            samples[id(r)].append(time.perf_counter() - start)
+    for r in final:
+        r["ladder_seconds"] = r["seconds"]
+        r["seconds"] = statistics.median(samples[id(r)])
+        r["us_per_particle_run"] = r["seconds"] / r["particles"] * 1e6
+    log(f"  re-timed {len(final)} finalists side by side, {rounds} rounds")
     return rows
 
 
@@ -284,12 +347,13 @@ def main():
         print(f"== {scene_name} ({opts.dtype}, N = {opts.n})", flush=True)
         rows = race(scene_name, n=opts.n, dtype=opts.dtype, repeats=opts.repeats, time_cap=opts.time_cap,
                     schemes=schemes, log=lambda s: print(s, flush=True))  # fmt: skip
+        rows = retime_side_by_side(rows, BUDGETS[opts.dtype], log=lambda s: print(s, flush=True))
         table = race_table(rows, BUDGETS[opts.dtype])
         print(format_race(scene_name, opts.dtype, table), flush=True)
         stem = f"race_{scene_name}_{opts.dtype}"
         plot_work_precision(rows, out / f"{stem}.png")
         report["scenes"][scene_name] = {
-            "rows": rows,
+            "rows": [{k: v for k, v in r.items() if k != RERUN} for r in rows],
             "table": [
                 {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
                 for b, o, d, r in table
