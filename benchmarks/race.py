@@ -88,14 +88,15 @@ def step_ladder(order, start=8, stop=10**6):
         steps = max(steps + 1, int(round(start * growth**k)))
 
 
+def seconds_of_one_run(compiled, *args):
+    start = time.perf_counter()
+    jax.block_until_ready(compiled(*args))
+    return time.perf_counter() - start
+
+
 def timed(compiled, *args, repeats):
     out = jax.block_until_ready(compiled(*args))
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(compiled(*args))
-        samples.append(time.perf_counter() - start)
-    return out, statistics.median(samples)
+    return out, statistics.median(seconds_of_one_run(compiled, *args) for _ in range(repeats))
 
 
 def fixed_step_runner(scheme, scene):
@@ -196,7 +197,7 @@ def race(
             log(f"  {name}: skipped ({str(err).split('.')[0]})")
             continue
         compile_s = time.perf_counter() - start
-        errors, steps = [], 0
+        errors = []
         for steps in step_ladder(scheme.order):
             dt = t_end / steps
             out, seconds = timed(compiled, state, jnp.asarray(dt, dtype_), steps, repeats=repeats)
@@ -251,19 +252,18 @@ def race(
 
 
 def finalists(rows, budgets, per_side=3):
-    """The rows that can win a budget: for each budget and side (jaxrot, diffrax), the cheapest row of
-    each of the ``per_side`` methods whose cheapest row meeting it was fastest on the ladder."""
+    """The rows that can win a budget: each method's fastest row meeting it, for the ``per_side``
+    fastest methods of each side (jaxrot, diffrax), over all budgets."""
     chosen = {}
     for budget in budgets:
-        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        fastest = {}
+        for r in (r for r in rows if r["max_orientation_error_rad"] <= budget):
+            current = fastest.get(r["method"])
+            if current is None or r["seconds"] < current["seconds"]:
+                fastest[r["method"]] = r
         for side in (True, False):
-            best = {}
-            for r in ok:
-                current = best.get(r["method"])
-                if _is_diffrax(r) == side and (current is None or r["seconds"] < current["seconds"]):
-                    best[r["method"]] = r
-            for r in sorted(best.values(), key=lambda r: r["seconds"])[:per_side]:
-                chosen[id(r)] = r
+            ranked = sorted((r for r in fastest.values() if _is_diffrax(r) == side), key=_seconds)
+            chosen.update((id(r), r) for r in ranked[:per_side])
     return list(chosen.values())
 
 
@@ -279,9 +279,7 @@ def retime_side_by_side(rows, budgets, rounds=7, log=print):
     for _ in range(rounds):
         for r in final:
             compiled, args = r[RERUN]
-            start = time.perf_counter()
-            jax.block_until_ready(compiled(*args))
-            samples[id(r)].append(time.perf_counter() - start)
+            samples[id(r)].append(seconds_of_one_run(compiled, *args))
     for r in final:
         r["ladder_seconds"] = r["seconds"]
         r["seconds"] = statistics.median(samples[id(r)])
@@ -295,11 +293,15 @@ def race_table(rows, budgets):
     table = []
     for budget in budgets:
         ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
-        ours = min((r for r in ok if not _is_diffrax(r)), key=lambda r: r["seconds"], default=None)
-        theirs = min((r for r in ok if _is_diffrax(r)), key=lambda r: r["seconds"], default=None)
+        ours = min((r for r in ok if not _is_diffrax(r)), key=_seconds, default=None)
+        theirs = min((r for r in ok if _is_diffrax(r)), key=_seconds, default=None)
         ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
         table.append((budget, ours, theirs, ratio))
     return table
+
+
+def _seconds(row):
+    return row["seconds"]
 
 
 def _is_diffrax(row):
