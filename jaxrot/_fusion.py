@@ -24,3 +24,22 @@ def stage(*values):
     """
     kept = jax.lax.optimization_barrier(values)
     return kept[0] if len(values) == 1 else kept
+
+
+def stage_stacked(*values):
+    """`stage` of several same-shaped arrays computed in one loop: as one ``(…, k)`` array.
+
+    XLA:CPU compiles each materialised array to its own loop over the bodies, and a value that
+    several of them read is recomputed in each; stacked, the values come out of one loop (measured
+    on the free rotor's four modified-moment sums, which six loops recomputed: the ``"splitting"``
+    step ~2% faster, float64, N = 10⁴; the same idea in the rotor's loop carry gave 10%). Returns
+    the values, unstacked.
+
+    Example:
+        >>> import jax.numpy as jnp
+        >>> from jaxrot._fusion import stage_stacked
+        >>> [v.tolist() for v in stage_stacked(jnp.arange(2.0), jnp.ones(2))]
+        [[0.0, 1.0], [1.0, 1.0]]
+    """
+    stacked = stage(jax.numpy.stack(values, axis=-1))
+    return tuple(stacked[..., k] for k in range(len(values)))

@@ -1,8 +1,9 @@
 r"""A fast free rotor: the torque-free rigid body by the preprocessed discrete Moser–Veselov method.
 
 `free_rotor` has the contract of `jaxrot.analytic.free_motion` (the exact solution by elliptic
-functions), at about 1.1–1.5× the cost of one `"zhao"` step (float64; ~2× in float32) instead of
-~75×, for splitting schemes that call a rotor many times per step.
+functions), at about 1.2× the cost of one torque-free `"zhao"` step in float64 (3× in float32)
+instead of ~120× (N = 10⁴ bodies, 2 CPU cores, XLA's YNN fusions off, `benchmarks/rotor.py`), for
+splitting schemes that call a rotor many times per step.
 
 Method (Hairer & Vilmart 2006). One step of length ``h`` of the discrete Moser–Veselov (DMV)
 algorithm, written with the body-frame angular momentum ``m`` and the quaternion, is
@@ -20,28 +21,32 @@ the step approximates the exact flow to order 10, in ``m`` and in the orientatio
 depend on conserved quantities only, so ``Ĩ`` is fixed during a step, and since ``S ≠ 0`` the
 exact energy ``E`` is conserved too.
 
-Here the time ``t`` is covered by ``n`` equal DMV10 steps (``n = 3`` in float64, 2 in float32):
+Here the time ``t`` is covered by ``n = 2`` equal DMV10 steps (``substeps``; float64 and float32):
 local error ``O((|ω| t)¹¹ / n¹⁰)``. Measured against `free_motion` (largest orientation error in
 rad or ``ω`` error, over random states with ``|ω| = 1`` and the bodies ``I = (1, 2, 3)``,
-``(1, 1, 1.9)``, ``(0.1, 1, 1.05)``, ``(1, 1, 1)``, ``(1, 1.5, 2)``; float64;
+``(1, 1, 1.9)``, ``(0.1, 1, 1.05)``, ``(1, 1, 1)``, ``(1e-3, 1, 1)``; float64;
 ``benchmarks/rotor.py`` prints the full table)::
 
-    |ω| |t|              0.1     0.3     0.5     0.6     0.8     1.0     1.5     2.0     2.5
-    n = 3 (default)      4e-14   4e-14   5e-14   8e-14   2e-12   2e-11   3e-9    8e-8    1e-6
-    n = 1                4e-14   2e-12   6e-10   5e-9    1e-7    —       —       —       —
+    |ω| |t|              0.1     0.3     0.5     0.6     0.8     1.0     1.5     1.9     2.5
+    n = 2 (default)      4e-14   6e-14   7e-13   5e-12   1e-10   1e-9    2e-7    3e-6    NaN
+    n = 3                4e-14   6e-14   4e-14   1e-13   2e-12   2e-11   3e-9    4e-8    1e-6
+    n = 1                4e-14   2e-12   6e-10   5e-9    1e-7    NaN     NaN     NaN     NaN
 
 (the floor, 4e-14, is the round-off of the flat body ``(0.1, 1, 1.05)`` in both solutions; 5e-15
-for the others). The implicit equation is solved by two Gauss–Seidel sweeps and two Newton
-steps (3×3, by cofactors), converged to round-off while one DMV step turns by less than 0.5 rad.
+for the others; the needle ``(1e-3, 1, 1)`` is NaN from 0.7 with ``n = 2``, see below). Two steps
+rather than three: a DMV step costs ~10 ns a body (float64, N = 10⁴, 2 cores), and the third made
+the ``"splitting"`` step 1.17× slower for accuracy that only shows above ``|ω| |t| = 0.3``. The
+implicit equation is solved by two Gauss–Seidel sweeps and two Newton steps (3×3, by cofactors),
+converged to round-off while one DMV step turns by less than 0.5 rad.
 
 Limits, where the result is NaN rather than wrong: one DMV step may turn by at most 1 rad
 (``|ω| |t| <= n``; near π/2 the DMV equation has no solution any more; pass a larger
 ``substeps``), and the rounding error of the modified moments, whose polynomial's terms cancel
 for a needle (``I₁ ≪ I₂ ≈ I₃``), estimated from the terms' sizes, must stay below 1e-12 or 100 ulp,
-whichever is more (measured, float64: ``I = (1e-2, 1, 1)`` is unaffected; ``(1e-3, 1, 1)`` is
-exact to 1e-13 up to ``|ω| t = 0.6``, 2e-12 at 0.8 and NaN from 1; ``(1e-4, 1, 1)`` NaN from 0.5,
-``(1e-6, 1, 1)`` from 0.1; float32: ``(1e-3, 1, 1)`` valid to ``|ω| t = 0.3``). A stable form of
-the modified moments for needles (the coefficients rewritten without the cancellation) would lift
+whichever is more (measured with ``n = 2``, float64: ``I = (1e-2, 1, 1)`` valid to ``|ω| t = 1.5``;
+``(1e-3, 1, 1)`` exact to 1e-13 up to 0.3, 7e-13 at 0.5 and NaN from 0.7; ``(1e-4, 1, 1)`` NaN from
+0.3, ``(1e-6, 1, 1)`` from 0.05; float32: ``(1e-3, 1, 1)`` NaN from 0.4). A stable form of the
+modified moments for needles (the coefficients rewritten without the cancellation) would lift
 this limit.
 
 Round-off. ``q`` and ``ω`` are converted between frames with ``q`` normalised and its residual
@@ -72,16 +77,15 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ._fusion import stage
+from ._fusion import stage, stage_stacked
 
 
 __all__ = ["free_rotor"]
 
-# DMV10 steps per call, by float width in bytes: float64 needs 3 to keep the truncation error
-# (~(|ω|t/n)^11) at round-off for |ω| t <= 0.5; 2 in float32, where 1 would already be at round-off
-# there, so that the call stays valid up to |ω| t = 2.
-_SUBSTEPS = {8: 3}
-_SUBSTEPS_DEFAULT = 2
+# DMV10 steps per call: 2 keeps the truncation error (~(|ω|t/n)^11) at float64 round-off for
+# |ω| t <= 0.3 (5e-13 at 0.5) and the call valid up to |ω| t = 2; 3 reaches round-off up to 0.5 but
+# made the "splitting" step 1.17x slower (float64, N = 10⁴), one DMV step costing ~10 ns a body.
+_SUBSTEPS = 2
 # Largest angle |ω| |t| / n of one DMV step: near π/2 the DMV equation has no solution any more.
 _MAX_ANGLE = 1.0
 _SWEEPS = 2
@@ -307,7 +311,7 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         moments: ``(3,)`` principal moments of inertia (mass × length²), ascending as
             `jaxrot.analytic.principal_axes` returns them (any order works here).
         t: scalar time elapsed, any sign (``t = 0`` returns the input, renormalised).
-        substeps: DMV10 steps covering ``t`` (a Python int); default 3 in float64, 2 otherwise.
+        substeps: DMV10 steps covering ``t`` (a Python int); default 2.
             Valid while ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
 
     Returns:
@@ -329,7 +333,7 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     """
     dtype = jnp.asarray(q_principal).dtype
     if substeps is None:
-        substeps = _SUBSTEPS.get(jnp.dtype(dtype).itemsize, _SUBSTEPS_DEFAULT)
+        substeps = _SUBSTEPS
     if not isinstance(substeps, int) or substeps < 1:
         raise ValueError(f"`substeps` must be a Python int >= 1; got {substeps!r}.")
     q_principal = jnp.asarray(q_principal, dtype)
@@ -359,6 +363,8 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     scale_s, shift_d, size_s, size_d = _modification(
         inertia, (0.5 * h * h) * targets[0], (0.5 * h * h) * targets[1]
     )
+    # One loop for the four sums (XLA:CPU otherwise recomputed them in each of six consumers).
+    scale_s, shift_d, size_s, size_d = stage_stacked(scale_s, shift_d, size_s, size_d)
     p = tuple(scale_s * v + shift_d for v in inverse)  # modified inverse moments 1/Ĩ
     # The terms of S and D can be far larger than their sums: for a needle (I₁ ≪ I₂ ≈ I₃) they grow
     # like (h²|m|²/I₁²…)^k and cancel to O(1), so 1/Ĩ_j keeps only ~eps · cond of relative accuracy,
@@ -375,7 +381,7 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     p, fad, f = staged[:3], staged[3:6], staged[6:]
 
     def substep(_, carry):
-        q, m = carry[:4], carry[4:]
+        q, m = (tuple(a[..., k] for k in range(a.shape[-1])) for a in carry)
         w = tuple(mi * pi for mi, pi in zip(m, p, strict=True))
         # Iterate on stop-gradient copies; the last Newton step, differentiated, then carries the
         # implicit-function derivative of the converged b (Newton's map is stationary there).
@@ -397,15 +403,18 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
             qz + qw * c3 + qx * c2 - qy * c1,
         )
         m = (m[0] + kick * fad[0] * b2 * b3, m[1] + kick * fad[1] * b1 * b3, m[2] + kick * fad[2] * b1 * b2)
-        return stage(*q, *m)
+        return jnp.stack(q, axis=-1), jnp.stack(m, axis=-1)
 
+    # The loop carries q and m as (…, 4) and (…, 3) arrays: XLA:CPU then updates each in one loop,
+    # where seven separate arrays took seven loops and seven copies per substep (measured: the
+    # "splitting" step 10% faster, float64, N = 10⁴).
+    carry = (jnp.stack(q, axis=-1), jnp.stack(m, axis=-1))
     if _SCAN:
-        carry = lax.fori_loop(0, substeps, substep, (*q, *m))
+        carry = lax.fori_loop(0, substeps, substep, carry)
     else:
-        carry = (*q, *m)
         for i in range(substeps):
             carry = substep(i, carry)
-    q, m = carry[:4], carry[4:]
+    q, m = (tuple(a[..., k] for k in range(a.shape[-1])) for a in carry)
 
     norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     q = tuple(c * norm for c in q)

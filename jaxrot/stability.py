@@ -22,11 +22,11 @@ infinite error. A float32 run is compared with the exact motion of its own
 
 Measured limits (``tol = 1e-3`` rad per step, default body, float64 and float32 alike;
 ``benchmarks/stability.py`` prints the full table, ``tests/test_stability.py`` checks it):
-``zhao`` 0.345, ``rozmanov`` 0.325, ``euler`` 0.0907, ``no_squish`` 0.242, ``splitting`` 2.69
-(its DMV rotor is exact to round-off up to 0.5 rad per step and NaN from ~2.8; with
+``zhao`` 0.345, ``rozmanov`` 0.325, ``euler`` 0.0907, ``no_squish`` 0.242, ``splitting`` 1.80
+(its DMV rotor is exact to round-off up to 0.3 rad per step and NaN from 2; with
 ``Splitting(rotor="exact")``, exact for a free body: the whole ladder to 10 passes). On a needle
 of inertia ratio 1e6 the schemes that carry the angular momentum need far smaller steps
-(``rozmanov`` 0.0027, ``no_squish`` 0.012; ``zhao`` 0.29, ``euler`` 0.071; ``splitting`` 0.050,
+(``rozmanov`` 0.0027, ``no_squish`` 0.012; ``zhao`` 0.29, ``euler`` 0.071; ``splitting`` 0.033,
 where the DMV rotor's modified moments lose their digits and it returns NaN). Above its limit
 each scheme loses accuracy; ``zhao`` also blows up (an explicit update of ``ω`` with the
 gyroscopic term ``ω × Iω``), to an infinity and then NaN within 8 steps, from 3.98 rad per

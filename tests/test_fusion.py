@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxrot
-from jaxrot._fusion import stage
+from jaxrot._fusion import stage, stage_stacked
 from jaxrot.scenes import heavy_top
 
 
@@ -38,9 +38,10 @@ def test_float64_steps_use_the_vectorised_kernel(scheme):
     assert text.count(" cosine(") == 0
 
 
-def test_stage_is_the_identity_for_values_gradients_and_batching():
+@pytest.mark.parametrize("barrier", [stage, stage_stacked], ids=["stage", "stage_stacked"])
+def test_stage_is_the_identity_for_values_gradients_and_batching(barrier):
     def f(x):
-        y, z = stage(jnp.sin(x), x**2)
+        y, z = barrier(jnp.sin(x), x**2)
         return jnp.sum(y * z)
 
     x = jnp.linspace(0.0, 1.0, 5)

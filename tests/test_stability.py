@@ -52,13 +52,13 @@ LIMITS[("generic", "float32")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_
 LIMITS[("needle", "float64")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
 LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
 # The splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): near-exact, up to where its
-# sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 3 in float64, 2 in float32, over the
-# largest rotor weight: 1 for splitting, 0.6 for srkn6b), or, on the needle, up to where the modified
-# moments' cancellation passes the rotor's rounding bound (NaN beyond).
-LIMITS[("generic", "float64")] |= {"splitting": 2.692, "srkn6b": 4.441, "srkn14a": 8.511}
-LIMITS[("generic", "float32")] |= {"splitting": 1.789, "srkn6b": 2.951, "srkn14a": 5.689}
-LIMITS[("needle", "float64")] |= {"splitting": 0.04983, "srkn6b": 0.06918, "srkn14a": 0.1334}
-LIMITS[("needle", "float32")] |= {"splitting": 0.02126, "srkn6b": 0.04624, "srkn14a": 0.08913}
+# two sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 2 over the largest rotor weight: 1 for
+# splitting, 0.6 for srkn6b), or, on the needle, up to where the modified moments' cancellation
+# passes the rotor's rounding bound (NaN beyond).
+LIMITS[("generic", "float64")] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
+LIMITS[("generic", "float32")] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
+LIMITS[("needle", "float64")] |= {"splitting": 0.03335, "srkn6b": 0.05515, "srkn14a": 0.1062}
+LIMITS[("needle", "float32")] |= {"splitting": 0.0213, "srkn6b": 0.03517, "srkn14a": 0.06773}
 # dexp⁻¹ has a pole at |Θ| = 2π: the Lie-group RK stages (|Θ_i| ≈ c_i |ω|Δt) stay finite below it,
 # and are NaN at 10 rad per step (measured finite up to 4.6 for rkmk4).
 FINITE_UP_TO = {"zhao": 3.0, "euler": 3.0, "srkn6b": 3.0, "srkn14a": 3.0}
