@@ -268,7 +268,7 @@ def finalists(rows, budgets, per_side=3):
 
 
 def retime_side_by_side(rows, budgets, rounds=7, log=print):
-    """Time the `finalists` again, round-robin: each round runs every finalist once, in turn.
+    """Time the `finalists` again, round-robin, in place: each round runs every finalist once, in turn.
 
     A ladder times each method minutes after the others; load on the machine drifts over that span
     (the same compiled rkmk_dopri8 step measured 1.5x apart in two runs of the race). Interleaved,
@@ -285,7 +285,6 @@ def retime_side_by_side(rows, budgets, rounds=7, log=print):
         r["seconds"] = statistics.median(samples[id(r)])
         r["us_per_particle_run"] = r["seconds"] / r["particles"] * 1e6
     log(f"  re-timed {len(final)} finalists side by side, {rounds} rounds")
-    return rows
 
 
 def race_table(rows, budgets):
@@ -349,7 +348,7 @@ def main():
         print(f"== {scene_name} ({opts.dtype}, N = {opts.n})", flush=True)
         rows = race(scene_name, n=opts.n, dtype=opts.dtype, repeats=opts.repeats, time_cap=opts.time_cap,
                     schemes=schemes, log=lambda s: print(s, flush=True))  # fmt: skip
-        rows = retime_side_by_side(rows, BUDGETS[opts.dtype], log=lambda s: print(s, flush=True))
+        retime_side_by_side(rows, BUDGETS[opts.dtype], log=lambda s: print(s, flush=True))
         table = race_table(rows, BUDGETS[opts.dtype])
         print(format_race(scene_name, opts.dtype, table), flush=True)
         stem = f"race_{scene_name}_{opts.dtype}"

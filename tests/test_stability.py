@@ -55,8 +55,8 @@ LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rk
 # two sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 2 over the largest rotor weight: 1 for
 # splitting, 0.6 for srkn6b), or, on the needle, up to where the modified moments' cancellation
 # passes the rotor's rounding bound (NaN beyond).
-LIMITS[("generic", "float64")] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
-LIMITS[("generic", "float32")] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
+for dtype in ("float64", "float32"):  # the same two DMV sub-steps in both
+    LIMITS[("generic", dtype)] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
 LIMITS[("needle", "float64")] |= {"splitting": 0.03335, "srkn6b": 0.05515, "srkn14a": 0.1062}
 LIMITS[("needle", "float32")] |= {"splitting": 0.0213, "srkn6b": 0.03517, "srkn14a": 0.06773}
 # dexp⁻¹ has a pole at |Θ| = 2π: the Lie-group RK stages (|Θ_i| ≈ c_i |ω|Δt) stay finite below it,
