@@ -25,7 +25,11 @@ from ._chunked import (
 )
 from ._drive import Drive as Drive
 from ._fit import FitResult as FitResult, fit_inertia as fit_inertia
-from ._inertia import BodyInertia as BodyInertia, body_inertia as body_inertia
+from ._inertia import (
+    BodyInertia as BodyInertia,
+    MathematicalBody as MathematicalBody,
+    body_inertia as body_inertia,
+)
 from ._particles import per_body as per_body
 from ._reference import reference_rollout as reference_rollout
 from ._rollout import rollout as rollout

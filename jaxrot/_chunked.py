@@ -163,7 +163,9 @@ def _generate(run: Run, chunk_steps: int, start, *, warn: bool) -> Iterator[tupl
         if warn and saves_done == run.n_saves:
             run.warn_if_reported(run.scheme.summarize(carry), stacklevel=2)
         checkpoint = Checkpoint(carry, saves_done * run.save_every, **metadata)
-        yield unflatten_trajectory(traj, run.batch_shape), checkpoint
+        traj = unflatten_trajectory(traj, run.batch_shape)
+        run.raise_if_nonfinite(traj, "jaxrot.rollout_chunks", saves_done + 1 - traj.t.shape[0])
+        yield traj, checkpoint
 
 
 def rollout_chunks(
@@ -182,6 +184,7 @@ def rollout_chunks(
     normalize: bool = False,
     resume: Checkpoint | None = None,
     runtime_check: bool = False,
+    check_finite: bool = True,
 ) -> Iterator[tuple[Trajectory, Checkpoint]]:
     """`jaxrot.rollout` a chunk of steps at a time: yields ``(trajectory_chunk, checkpoint)``.
 
@@ -203,6 +206,9 @@ def rollout_chunks(
         runtime_check: as in `jaxrot.rollout`, with global step numbers; an eager
             run raises `jaxrot.IntegrationError` after the first chunk in which a
             step went bad (its message counts the particles affected so far).
+        check_finite: as in `jaxrot.rollout`, per chunk: an eager run raises
+            `jaxrot.IntegrationError` at the first chunk with a NaN or an infinity
+            (saved state numbers within that chunk; its times are global).
 
     Yields:
         ``(trajectory_chunk, checkpoint)``: a `Trajectory` with ``t`` ``(k,)``,
@@ -232,7 +238,19 @@ def rollout_chunks(
         True
     """
     run = prepare_run(
-        scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
+        scheme,
+        state,
+        inertia,
+        dt,
+        n_steps,
+        torque,
+        args,
+        save_every,
+        t0,
+        drive,
+        normalize,
+        runtime_check,
+        check_finite,
     )
     chunk_steps = _check_chunk_steps(chunk_steps, run.save_every)
     # A mismatched checkpoint is rejected now, not at the first chunk.

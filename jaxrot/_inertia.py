@@ -7,6 +7,7 @@ to 3×3 matrix products with an inverse computed once, outside the time loop.
 
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -62,3 +63,26 @@ def is_diagonal_form(inertia) -> bool:
     two axes decide, so ``(..., 3, 3)`` is always read as tensors.
     """
     return not (inertia.ndim >= 2 and inertia.shape[-2:] == (3, 3))
+
+
+class MathematicalBody(eqx.Module):
+    """Opt-in for an inertia that no mass distribution has: integrate it anyway.
+
+    Every real body satisfies the triangle inequality ``I₁ + I₂ ≥ I₃`` (for every permutation of its
+    principal moments), and jaxrot rejects an inertia that violates it by more than the rounding of
+    three significant digits. Mathematical test bodies may violate it on purpose (ACM TOMS Algorithm
+    903 uses the moments (1, 1.0127, 3.3062)); wrap them in this class wherever an inertia is taken.
+    Positive definiteness is still required. A pytree: it passes through ``jit`` as it is.
+
+    Attributes:
+        inertia: principal moments ``(..., 3)`` or tensors ``(..., 3, 3)``, as the unwrapped argument.
+
+    Example:
+        >>> import jax.numpy as jnp, jaxrot
+        >>> body = jaxrot.MathematicalBody(jnp.array([1.0, 1.0127, 3.3062]))  # ACM TOMS 903
+        >>> s = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 1.0, 0.2]))
+        >>> jaxrot.rollout("zhao", s, body, 0.01, 10).q.shape
+        (11, 4)
+    """
+
+    inertia: jax.Array

@@ -27,6 +27,7 @@ def rollout(
     normalize: bool = False,
     return_carry: bool = False,
     runtime_check: bool = False,
+    check_finite: bool = True,
     progress: bool = False,
     chunk_steps: int | None = None,
 ):
@@ -60,7 +61,15 @@ def rollout(
         runtime_check: check every step (saved or not) for a NaN/inf in ``q`` or
             ``omega`` and for ``| |q| - 1 | > 1e-6``, and report the first bad step,
             its time and particle (see `jaxrot.IntegrationError`). Off by default:
-            then nothing is traced and it costs nothing.
+            then nothing is traced and it costs nothing. Under ``jit`` it is the
+            way to be told of a NaN: ``check_finite`` needs concrete results.
+        check_finite: eager calls (concrete results) only, on by default: raise
+            `jaxrot.IntegrationError` if a saved state holds a NaN or an infinity,
+            naming the first such saved state, the bodies affected, the largest
+            ``|ω|Δt`` seen and the scheme's measured limit from
+            `jaxrot.stability.LIMITS` with a ``dt`` inside it. One reduction over
+            the saved states (measured: under 1% of the run, `benchmarks/stability.py`).
+            ``False`` returns the values unchecked.
         progress: show a `tqdm` progress bar (on stderr, counting steps), updated
             between chunks of ``chunk_steps`` steps (default: about 100 chunks).
         chunk_steps: run in chunks of this many steps (a positive multiple of
@@ -81,7 +90,8 @@ def rollout(
             calls only.
 
     Raises:
-        jaxrot.IntegrationError: with ``runtime_check=True``, eager calls, when a
+        jaxrot.IntegrationError: eager calls, when a saved state holds a NaN or an
+            infinity (``check_finite``), or, with ``runtime_check=True``, when a
             step produced a NaN/inf or a non-unit quaternion. Under ``jit``/``vmap``/
             ``grad`` the same message is raised when the compiled code runs, wrapped
             by jax in ``jax.errors.JaxRuntimeError``.
@@ -105,7 +115,19 @@ def rollout(
         True
     """
     run = prepare_run(
-        scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
+        scheme,
+        state,
+        inertia,
+        dt,
+        n_steps,
+        torque,
+        args,
+        save_every,
+        t0,
+        drive,
+        normalize,
+        runtime_check,
+        check_finite,
     )
     if progress or chunk_steps is not None:
         return chunked_rollout(run, chunk_steps, progress=progress, return_carry=return_carry)
@@ -116,4 +138,5 @@ def rollout(
     summary = run.scheme.summarize(carry) if return_carry else carry
     run.warn_if_reported(summary, stacklevel=3)  # past `particle_sharded`'s wrapper to the caller
     traj = unflatten_trajectory(traj, run.batch_shape)
+    run.raise_if_nonfinite(traj)
     return (traj, carry) if return_carry else traj

@@ -21,27 +21,30 @@ the step approximates the exact flow to order 10, in ``m`` and in the orientatio
 depend on conserved quantities only, so ``Ĩ`` is fixed during a step, and since ``S ≠ 0`` the
 exact energy ``E`` is conserved too.
 
-Here the time ``t`` is covered by ``n = 2`` equal DMV10 steps (``substeps``; float64 and float32):
-local error ``O((|ω| t)¹¹ / n¹⁰)``. Measured against `free_motion` (largest orientation error in
-rad or ``ω`` error, over random states with ``|ω| = 1`` and the bodies ``I = (1, 2, 3)``,
-``(1, 1, 1.9)``, ``(0.1, 1, 1.05)``, ``(1, 1, 1)``, ``(1e-3, 1, 1)``; float64;
-``benchmarks/rotor.py`` prints the full table)::
+Here the time ``t`` is covered by ``n = ⌈|ω| |t| / a⌉`` equal DMV10 steps, chosen per body
+(`substeps_for`: ``a = 0.2`` rad in float64, 0.5 in float32, at least 2, at most 64): local
+error ``O(a¹¹)`` per step, so round-off at any ``|ω| |t|`` up to 10 rad. The steps use the
+scaling symmetry of the flow and of the DMV map (both functions of ``h m``): ``n`` steps of
+``t/n`` with the momentum ``m`` are computed as ``n`` steps of ``t/2`` with ``(2/n) m``, so the
+step length stays one scalar. The first two steps are a static loop; the rest a while loop
+that a body in the common range never enters, whose derivative rule carries the steps'
+Jacobian (JAX cannot reverse-differentiate a while loop). Measured against `free_motion`
+(largest orientation error in rad, or ω error relative to ``|ω|``; float64; bodies ``(1, 2,
+3)``, ``(2, 2, 2)``, ``(1, 1, 1.9)``, ``(0.1, 1, 1.05)``)::
 
-    |ω| |t|              0.1     0.3     0.5     0.6     0.8     1.0     1.5     1.9     2.5
-    n = 2 (default)      4e-14   6e-14   7e-13   5e-12   1e-10   1e-9    2e-7    3e-6    NaN
-    n = 3                4e-14   6e-14   4e-14   1e-13   2e-12   2e-11   3e-9    4e-8    1e-6
-    n = 1                4e-14   2e-12   6e-10   5e-9    1e-7    NaN     NaN     NaN     NaN
+    |ω| |t|                    0.01    0.3     1       3       10
+    (1, 2, 3)                  6e-16   8e-16   2e-14   6e-14   2e-13
+    sphere (2, 2, 2)           2e-16   3e-16   1e-15   3e-15   1e-14
+    (1, 1, 1.9)                3e-16   2e-16   3e-15   7e-15   2e-14
+    flat (0.1, 1, 1.05)        1e-15   8e-16   5e-14   1e-13   4e-13
 
-(the floor, 4e-14, is the round-off of the flat body ``(0.1, 1, 1.05)`` in both solutions; 5e-15
-for the others; the needle ``(1e-3, 1, 1)`` is NaN from 0.7 with ``n = 2``, see below). Two steps
-rather than three: a DMV step costs ~10 ns a body (float64, N = 10⁴, 2 cores), and the third made
-the ``"splitting"`` step 1.17× slower for accuracy that only shows above ``|ω| |t| = 0.3``. The
-implicit equation is solved by two Gauss–Seidel sweeps and two Newton steps (3×3, by cofactors),
-converged to round-off while one DMV step turns by less than 0.5 rad.
+With a fixed count (``substeps=2``, the default before) the error was 7e-13 at 0.5, 1e-9 at
+1, 3e-6 at 1.9 and NaN from 2. The choice costs 4-21% per call in the common range
+(|ω| t = 0.3, N = 10⁴, one core, same-run A/B; the closing note of issue 32 has the table).
 
 Limits, where the result is NaN rather than wrong: one DMV step may turn by at most 1 rad
-(``|ω| |t| <= n``; near π/2 the DMV equation has no solution any more; pass a larger
-``substeps``), and the rounding error of the modified moments, whose polynomial's terms cancel
+(near π/2 the DMV equation has no solution any more: ``|ω| |t| > 64`` by default, ``> n`` with
+a fixed ``substeps``), and the rounding error of the modified moments, whose polynomial's terms cancel
 for a needle (``I₁ ≪ I₂ ≈ I₃``), estimated from the terms' sizes, must stay below 1e-12 or 100 ulp,
 whichever is more (measured with ``n = 2``, float64: ``I = (1e-2, 1, 1)`` valid to ``|ω| t = 1.5``;
 ``(1e-3, 1, 1)`` exact to 1e-13 up to 0.3, 7e-13 at 0.5 and NaN from 0.7; ``(1e-4, 1, 1)`` NaN from
@@ -72,6 +75,7 @@ Reference:
 """
 
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
@@ -82,11 +86,19 @@ from ._fusion import stage, stage_stacked
 
 __all__ = ["free_rotor"]
 
-# DMV10 steps per call: 2 keeps the truncation error (~(|ω|t/n)^11) at float64 round-off for
-# |ω| t <= 0.3 (5e-13 at 0.5) and the call valid up to |ω| t = 2; 3 reaches round-off up to 0.5 but
-# made the "splitting" step 1.17x slower (float64, N = 10⁴), one DMV step costing ~10 ns a body.
-_SUBSTEPS = 2
+# DMV10 steps per call. By default each body takes its own number, n = ceil(|ω| |t| / a) with the
+# largest angle per DMV step a below, at least 2 and at most _MAX_SUBSTEPS. Two is the least: the
+# common range |ω| t <= 0.3 (float64) then costs what a fixed two did; the first two steps are a
+# static loop, the rest a while loop that such calls never enter.
+_MIN_SUBSTEPS = 2
+_MAX_SUBSTEPS = 64
+# Largest angle of one DMV step chosen by the rule, per dtype: the local error grows like a¹¹, so
+# 0.2 keeps float64 within ~1e-13 of the exact flow at any |ω| t (measured: 2 steps at 0.5 rad
+# gave 7e-13, 3 at 0.6 gave 1e-13), and 0.5 keeps float32 ~100× below its resolution (1e-9 for
+# two steps of 0.5 rad, in float64 arithmetic). Both leave |ω| t <= 0.3 on two steps.
+_STEP_ANGLE = {8: 0.2, 4: 0.5}
 # Largest angle |ω| |t| / n of one DMV step: near π/2 the DMV equation has no solution any more.
+# Reached only past _MAX_SUBSTEPS steps (|ω| t > 64) or with a fixed `substeps`.
 _MAX_ANGLE = 1.0
 _SWEEPS = 2
 _NEWTON = 2
@@ -296,6 +308,137 @@ def _round_off_correction(q, residual, omega, moments, targets):
     return _turn(q, residual, tuple(x * v + y * di for v, di in zip(iu, d, strict=True)))
 
 
+def _dmv_step(q, m, p, fad, f, g, g2, h):
+    """One DMV10 step of length ``h`` on the component tuples ``q`` (4) and ``m`` (3)."""
+    fixed = lax.stop_gradient
+    w = tuple(mi * pi for mi, pi in zip(m, p, strict=True))
+    # Iterate on stop-gradient copies; the last Newton step, differentiated, then carries the
+    # implicit-function derivative of the converged b (Newton's map is stationary there).
+    w_fixed, f_fixed, g2_fixed = tuple(map(fixed, w)), tuple(map(fixed, f)), fixed(g2)
+    b = w_fixed
+    for _ in range(_SWEEPS):
+        b = _sweep(b, w_fixed, f_fixed, g2_fixed)
+    for _ in range(_NEWTON - 1):
+        b = _newton(b, w_fixed, f_fixed, g2_fixed)
+    b1, b2, b3 = stage(*_newton(tuple(map(fixed, b)), w, f, g2))
+    c1, c2, c3 = g * b1, g * b2, g * b3
+    kick = h / (1 + c1 * c1 + c2 * c2 + c3 * c3)
+    qw, qx, qy, qz = q
+    # q ⊗ (1, c), left unnormalised until the end (|q| grows by √(1 + |c|²) per step).
+    q = (
+        qw - qx * c1 - qy * c2 - qz * c3,
+        qx + qw * c1 + qy * c3 - qz * c2,
+        qy + qw * c2 + qz * c1 - qx * c3,
+        qz + qw * c3 + qx * c2 - qy * c1,
+    )
+    m = (m[0] + kick * fad[0] * b2 * b3, m[1] + kick * fad[1] * b1 * b3, m[2] + kick * fad[2] * b1 * b2)
+    return q, m
+
+
+def _split(a):
+    return tuple(a[..., k] for k in range(a.shape[-1]))
+
+
+def _repeat(s, n, step):
+    """``step`` applied ``n`` times (one body: ``n`` a scalar) to the arrays ``s``.
+
+    Written for one body so that under `jax.vmap` JAX's own rule runs the loop while any body needs
+    it and keeps each body's carry once it is done: no select of ours on top (measured: a masked
+    loop over the batch put the carry in an interleaved layout, +10-25% per rotor call).
+    """
+    return lax.while_loop(lambda c: c[0] < n, lambda c: (c[0] + 1, step(c[1])), (jnp.zeros((), n.dtype), s))[
+        1
+    ]
+
+
+def _per_body(fn, batch, *args):
+    """``fn`` of one body, mapped over the leading axes ``batch`` of ``args`` (leaves broadcast to them)."""
+    if not batch:
+        return fn(*args)
+    size = math.prod(batch)
+
+    def flatten(x):
+        x = jnp.asarray(x)
+        core = x.shape[len(batch) :] if x.ndim >= len(batch) and x.shape[: len(batch)] == batch else x.shape
+        return jnp.broadcast_to(x, batch + core).reshape((size, *core))
+
+    out = jax.vmap(fn)(*jax.tree_util.tree_map(flatten, args))
+    return jax.tree_util.tree_map(lambda y: y.reshape(batch + y.shape[1:]), out)
+
+
+def _step_with(p, fad, h):
+    """One DMV step ``(q, m) → (q, m)`` on 4- and 3-tuples of components, parameters ``p``, ``fad``, ``h``."""
+    g = 0.5 * h
+    f = tuple(g * fi * pi for fi, pi in zip(fad, p, strict=True))
+    return lambda s: _dmv_step(s[0], s[1], p, fad, f, g, g * g, h)
+
+
+def _stacked_step(p, fad, h):
+    """`_step_with` on the arrays ``q`` ``(…, 4)`` and ``m`` ``(…, 3)``: the form loops carry."""
+    step = _step_with(p, fad, h)
+
+    def stacked(carry):
+        q, m = step((_split(carry[0]), _split(carry[1])))
+        return jnp.stack(q, axis=-1), jnp.stack(m, axis=-1)
+
+    return stacked
+
+
+def _first_steps(q, m, p, fad, h):
+    """The first `_MIN_SUBSTEPS` DMV steps, a static loop."""
+    step = _stacked_step(p, fad, h)
+    return lax.fori_loop(0, _MIN_SUBSTEPS, lambda _, carry: step(carry), (q, m))
+
+
+@jax.custom_jvp
+def _dmv_steps(q, m, p, fad, h, n):
+    """``n >= _MIN_SUBSTEPS`` DMV steps of one body: ``q`` ``(4,)``, ``m`` ``(3,)`` → component tuples.
+
+    The first `_MIN_SUBSTEPS` in a static loop, the rest in a while loop that a body in the common
+    range never enters (under `jax.vmap`, JAX's rule runs it while any body needs it). JAX cannot
+    reverse-differentiate a while loop, so the derivative rule carries the extra steps' Jacobian as
+    a value: the tangent is the static steps' derivative followed by a product with that Jacobian,
+    which reverse mode can transpose.
+    """
+    q, m = _repeat(_first_steps(q, m, p, fad, h), n - _MIN_SUBSTEPS, _stacked_step(p, fad, h))
+    return _split(q), _split(m)
+
+
+@_dmv_steps.defjvp
+def _dmv_steps_jvp(primals, tangents):
+    q, m, p, fad, h, n = primals
+    dq, dm, dp, dfad, dh, _ = tangents
+    s, ds = jax.jvp(_first_steps, (q, m, p, fad, h), (dq, dm, dp, dfad, dh))
+    state = jnp.concatenate(s)
+    theta = jnp.stack((*p, *fad, h))
+    z_tangent = jnp.concatenate([*ds, jnp.stack((*dp, *dfad, dh))])
+    n_s, size = state.shape[0], state.shape[0] + theta.shape[0]
+
+    def flat(z):
+        step = _step_with(_split(z[n_s : n_s + 3]), _split(z[n_s + 3 : n_s + 6]), z[n_s + 6])
+        q, m = step((_split(z[:4]), _split(z[4:n_s])))
+        return jnp.stack(q + m)
+
+    def step(carry):
+        state, jac = carry  # (7,) and its Jacobian in (state, θ) after the first steps, (7, 14)
+        d = jax.jacfwd(flat)(jnp.concatenate([state, theta]))  # ∂ step / ∂ (state, θ): (7, 14)
+        jac = d[:, :n_s] @ jac + jnp.concatenate([jnp.zeros_like(d[:, :n_s]), d[:, n_s:]], axis=1)
+        return flat(jnp.concatenate([state, theta])), jac
+
+    state, jac = _repeat((state, jnp.eye(n_s, size, dtype=state.dtype)), n - _MIN_SUBSTEPS, step)
+    d_state = jac @ z_tangent
+    return (_split(state[:4]), _split(state[4:])), (_split(d_state[:4]), _split(d_state[4:]))
+
+
+def substeps_for(angle, dtype):
+    """DMV10 steps the rotor takes for a flow of ``angle = |ω| |t|`` rad (per body) in ``dtype``."""
+    per_step = _STEP_ANGLE[jnp.dtype(dtype).itemsize]
+    n = jnp.ceil(angle / per_step)
+    return jnp.clip(jnp.where(jnp.isfinite(n), n, _MAX_SUBSTEPS), _MIN_SUBSTEPS, _MAX_SUBSTEPS).astype(
+        jnp.int32
+    )
+
+
 # Jitted so that an eager call compiles once, not primitive by primitive (inlined under an outer jit).
 @functools.partial(jax.jit, static_argnames="substeps")
 def free_rotor(q_principal, omega, moments, t, *, substeps=None):
@@ -311,8 +454,10 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         moments: ``(3,)`` principal moments of inertia (mass × length²), ascending as
             `jaxrot.analytic.principal_axes` returns them (any order works here).
         t: scalar time elapsed, any sign (``t = 0`` returns the input, renormalised).
-        substeps: DMV10 steps covering ``t`` (a Python int); default 2.
-            Valid while ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
+        substeps: DMV10 steps covering ``t`` (a Python int), or None (default): each body
+            takes ``ceil(|ω| |t| / a)`` steps, at least 2 and at most 64, with ``a = 0.2`` rad
+            in float64 and 0.5 in float32 (`substeps_for`). A fixed count is valid while
+            ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
 
     Returns:
         ``(q_principal(t), omega(t))``, shapes ``(4,)`` and ``(3,)``, in the dtype of
@@ -330,21 +475,19 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         >>> energy = lambda q, w: jnp.sum(moments * quat.rotate(quat.conjugate(q), w) ** 2)
         >>> print(bool(jnp.abs(energy(q1, w1) / energy(q0, w0) - 1) < 1e-6))
         True
+        >>> q2, w2 = free_rotor(q0, jnp.array([300.0, -230.0, 80.0]), jnp.ones(3), 0.03)  # 11.6 rad
+        >>> print(bool(jnp.all(jnp.isfinite(q2))))
+        True
     """
     dtype = jnp.asarray(q_principal).dtype
-    if substeps is None:
-        substeps = _SUBSTEPS
-    if not isinstance(substeps, int) or substeps < 1:
-        raise ValueError(f"`substeps` must be a Python int >= 1; got {substeps!r}.")
+    if substeps is not None and (not isinstance(substeps, int) or substeps < 1):
+        raise ValueError(f"`substeps` must be None or a Python int >= 1; got {substeps!r}.")
     q_principal = jnp.asarray(q_principal, dtype)
     omega = jnp.asarray(omega).astype(dtype)
     moments = jnp.asarray(moments).astype(dtype)
     t = jnp.asarray(t).astype(dtype)
     fixed = lax.stop_gradient
 
-    h = t / substeps
-    g = 0.5 * h
-    g2 = g * g
     inertia = tuple(moments[..., k] for k in range(3))
     inverse = tuple(1 / i for i in inertia)
     q = tuple(q_principal[..., k] for k in range(4))
@@ -353,15 +496,30 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     w_body = _turn(q, _unit_residual(q), tuple(omega[..., k] for k in range(3)), inverse=True)
     targets = _invariants(w_body, inertia)
     m = tuple(i * w for i, w in zip(inertia, w_body, strict=True))
-    angle = jnp.abs(h) * jnp.sqrt(w_body[0] ** 2 + w_body[1] ** 2 + w_body[2] ** 2)  # of one DMV step
+    total_angle = fixed(jnp.abs(t) * jnp.sqrt(w_body[0] ** 2 + w_body[1] ** 2 + w_body[2] ** 2))
+    if substeps is None:
+        # n steps of t/n for the momentum m are 2 steps' worth of t/2 for the momentum (2/n) m, then
+        # scaled back: the flow, and the DMV map (a function of h m), are invariant under h → h/k,
+        # m → k m. So h stays a scalar and only m and its invariants are scaled, per body.
+        count = substeps_for(total_angle, dtype)
+        n_ref = _MIN_SUBSTEPS
+        scale = n_ref / count.astype(dtype)
+        m = tuple(mi * scale for mi in m)
+        sizes = (targets[0] * scale * scale, targets[1] * scale * scale)
+    else:
+        count, n_ref, sizes = substeps, substeps, targets
+    h = t / n_ref
+    g = 0.5 * h
+    g2 = g * g
+    angle = total_angle / jnp.asarray(count).astype(dtype)  # of one DMV step
     # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes the earlier stages inside
     # every later one (measured 8x slower), and in the derivative programs too.
-    staged = stage(*q, *m, *targets, fixed(angle))
-    q, m, targets, angle = staged[:4], staged[4:7], staged[7:9], staged[9]
+    staged = stage(*q, *m, *targets, *sizes, angle)
+    q, m, targets, sizes, angle = staged[:4], staged[4:7], staged[7:9], staged[9:11], staged[11]
     valid = angle <= _MAX_ANGLE
 
     scale_s, shift_d, size_s, size_d = _modification(
-        inertia, (0.5 * h * h) * targets[0], (0.5 * h * h) * targets[1]
+        inertia, (0.5 * h * h) * sizes[0], (0.5 * h * h) * sizes[1]
     )
     # One loop for the four sums (XLA:CPU otherwise recomputed them in each of six consumers).
     scale_s, shift_d, size_s, size_d = stage_stacked(scale_s, shift_d, size_s, size_d)
@@ -381,40 +539,25 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     p, fad, f = staged[:3], staged[3:6], staged[6:]
 
     def substep(_, carry):
-        q, m = (tuple(a[..., k] for k in range(a.shape[-1])) for a in carry)
-        w = tuple(mi * pi for mi, pi in zip(m, p, strict=True))
-        # Iterate on stop-gradient copies; the last Newton step, differentiated, then carries the
-        # implicit-function derivative of the converged b (Newton's map is stationary there).
-        w_fixed, f_fixed, g2_fixed = tuple(map(fixed, w)), tuple(map(fixed, f)), fixed(g2)
-        b = w_fixed
-        for _ in range(_SWEEPS):
-            b = _sweep(b, w_fixed, f_fixed, g2_fixed)
-        for _ in range(_NEWTON - 1):
-            b = _newton(b, w_fixed, f_fixed, g2_fixed)
-        b1, b2, b3 = stage(*_newton(tuple(map(fixed, b)), w, f, g2))
-        c1, c2, c3 = g * b1, g * b2, g * b3
-        kick = h / (1 + c1 * c1 + c2 * c2 + c3 * c3)
-        qw, qx, qy, qz = q
-        # q ⊗ (1, c), left unnormalised until the end (|q| grows by √(1 + |c|²) per step).
-        q = (
-            qw - qx * c1 - qy * c2 - qz * c3,
-            qx + qw * c1 + qy * c3 - qz * c2,
-            qy + qw * c2 + qz * c1 - qx * c3,
-            qz + qw * c3 + qx * c2 - qy * c1,
-        )
-        m = (m[0] + kick * fad[0] * b2 * b3, m[1] + kick * fad[1] * b1 * b3, m[2] + kick * fad[2] * b1 * b2)
+        q, m = _dmv_step(_split(carry[0]), _split(carry[1]), p, fad, f, g, g2, h)
         return jnp.stack(q, axis=-1), jnp.stack(m, axis=-1)
 
     # The loop carries q and m as (…, 4) and (…, 3) arrays: XLA:CPU then updates each in one loop,
     # where seven separate arrays took seven loops and seven copies per substep (measured: the
     # "splitting" step 10% faster, float64, N = 10⁴).
     carry = (jnp.stack(q, axis=-1), jnp.stack(m, axis=-1))
-    if _SCAN:
-        carry = lax.fori_loop(0, substeps, substep, carry)
+    if substeps is None:
+        batch = jnp.broadcast_shapes(count.shape, jnp.shape(h))
+        q, m = _per_body(_dmv_steps, batch, *carry, p, fad, h, count)
     else:
-        for i in range(substeps):
-            carry = substep(i, carry)
-    q, m = (tuple(a[..., k] for k in range(a.shape[-1])) for a in carry)
+        if _SCAN:
+            carry = lax.fori_loop(0, substeps, substep, carry)
+        else:
+            for i in range(substeps):
+                carry = substep(i, carry)
+        q, m = _split(carry[0]), _split(carry[1])
+    if substeps is None:
+        m = tuple(mi / scale for mi in m)
 
     norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     q = tuple(c * norm for c in q)

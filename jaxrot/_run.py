@@ -18,7 +18,14 @@ from . import _blocking
 from ._drive import check_drive, driven_step, driven_torque
 from ._inertia import body_inertia
 from ._particles import PARTICLES, flatten_particles, split_per_body
-from ._runtime_check import check_in_graph, init_report, raise_if_bad, update_report
+from ._runtime_check import (
+    IntegrationError,
+    check_in_graph,
+    init_report,
+    nonfinite_message,
+    raise_if_bad,
+    update_report,
+)
 from ._sharding import particle_shards, shard_particles
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_count, check_dt, check_save_every, check_torque, is_concrete
@@ -45,6 +52,7 @@ class Run(NamedTuple):
     batch_shape: tuple
     runtime_check: bool
     n_blocks: int
+    check_finite: bool = True
 
     def flat(self, n_saves, carry=None, save_offset=None, state=None, keep_carry=True):
         """`_rollout_flat` of ``n_saves`` saves from ``state``, or continuing ``carry`` (see there)."""
@@ -79,6 +87,14 @@ class Run(NamedTuple):
         check(report, self.batch_shape, self.t0, self.dt, self.scheme.name)
         return carry
 
+    def raise_if_nonfinite(self, traj, caller="jaxrot.rollout", first_index=0):
+        """With ``check_finite`` and a concrete ``traj`` (its saved states numbered from ``first_index``):
+        raise `IntegrationError` if it holds a NaN/inf."""
+        if self.check_finite and is_concrete(traj):
+            text = nonfinite_message(traj, self.dt, self.scheme.name, caller, first_index)
+            if text is not None:
+                raise IntegrationError(text)
+
     def warn_if_reported(self, summary, stacklevel):
         """Warn of the problem the scheme reports in the (concrete) `summarize` of its final carry,
         if any, at the frame ``stacklevel`` levels above the caller, as `warnings.warn` counts."""
@@ -89,7 +105,19 @@ class Run(NamedTuple):
 
 
 def prepare_run(
-    scheme, state, inertia, dt, n_steps, torque, args, save_every, t0, drive, normalize, runtime_check
+    scheme,
+    state,
+    inertia,
+    dt,
+    n_steps,
+    torque,
+    args,
+    save_every,
+    t0,
+    drive,
+    normalize,
+    runtime_check,
+    check_finite=True,
 ) -> Run:
     """Check the arguments of `rollout` (before anything compiles) and flatten the particle axes."""
     scheme = resolve_scheme(scheme)
@@ -136,6 +164,7 @@ def prepare_run(
         batch_shape,
         bool(runtime_check),
         n_blocks,
+        bool(check_finite),
     )
 
 

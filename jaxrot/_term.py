@@ -81,7 +81,7 @@ class RigidBodyTerm(diffrax.AbstractTerm):
                 "Flatten the particle axes, or jax.vmap diffeqsolve over them."
             )
         batch_shape = y.q.shape[:-1]
-        inertia, per_particle = check_inertia(self.inertia, batch_shape, y.q.dtype)
+        inertia, per_particle = check_inertia(self.inertia, batch_shape, y.q.dtype, runtime=False)
         if not batch_shape:
             return fn(body_inertia(inertia), unwrap_per_body(args), *arrays)
         args_values, args_axes = split_per_body(args, batch_shape)

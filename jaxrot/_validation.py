@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._inertia import MathematicalBody
 from ._state import RotState
 
 
@@ -31,7 +32,13 @@ SUPPORTED_DTYPES = ("float32", "float64")
 
 
 def is_concrete(*xs) -> bool:
-    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
+    """Whether every leaf can be read here: not a tracer, nor an array spread over several processes
+    (a multi-process run's global array; its values live on other hosts, so its checks are skipped
+    as under ``jit``)."""
+    return not any(
+        isinstance(leaf, jax.core.Tracer) or not getattr(leaf, "is_fully_addressable", True)
+        for leaf in jax.tree_util.tree_leaves(xs)
+    )
 
 
 def check_values(x, failed, message, error=ValueError):
@@ -125,12 +132,20 @@ def check_state(state, *, normalize=False, name="state") -> RotState:
     return RotState(q, omega)
 
 
-def check_inertia(inertia, batch_shape, dtype, name="inertia"):
+def check_inertia(inertia, batch_shape, dtype, name="inertia", *, runtime=True):
     """Validate an inertia for particles with leading shape ``batch_shape``.
 
     Returns ``(inertia, per_particle)``; the accepted shapes, in the order they
     are matched, are ``batch + (3, 3)``, ``(3, 3)``, ``batch + (3,)``, ``(3,)``.
+    A `jaxrot.MathematicalBody` is unwrapped and exempt from the triangle inequality.
+    Concrete values are checked now (``ValueError``); a traced shared inertia, with ``runtime``,
+    by the compiled program (the same tests and tolerance, raised when it runs), so that a body is
+    accepted or refused alike under ``jit`` and eagerly. A traced per-particle inertia is not: the
+    check would be a reduction over all bodies, which a sharded rollout would communicate.
     """
+    physical = not isinstance(inertia, MathematicalBody)
+    if not physical:
+        inertia = inertia.inertia
     declared_dtype(inertia, name)
     inertia = jnp.asarray(inertia)
     batch_shape = tuple(batch_shape)
@@ -148,12 +163,59 @@ def check_inertia(inertia, batch_shape, dtype, name="inertia"):
         )
     inertia = inertia.astype(dtype)
     if is_concrete(inertia):
-        moments = check_inertia_values(np.asarray(inertia, dtype=np.float64), name)
+        moments = check_inertia_values(np.asarray(inertia, dtype=np.float64), name, physical=physical)
         check_conditioning(moments, dtype, name)
+    elif runtime and not per_particle:
+        inertia = _checked_in_graph(inertia, name, physical)
     return inertia, per_particle
 
 
-def check_inertia_values(inertia: np.ndarray, name="inertia"):
+def triangle_tolerance(moments):
+    """How far ``I₁ + I₂ − I₃`` may fall below zero for moments given to three significant digits.
+
+    Inertias are quoted to at least three significant digits; each rounded moment is off by up to
+    half a unit in its third digit, ``0.005 · 10^⌊log₁₀ I⌋``, so a planar body (``I₁ + I₂ = I₃``)
+    can show a violation up to the sum of the three (Hairer & Vilmart's water molecule, (0.345, 0.653,
+    1.0): 0.002 against 0.006). Works on NumPy and JAX arrays ``(..., 3)``; returns ``(...,)``.
+    """
+    xp = jnp if isinstance(moments, jax.Array) else np
+    positive = xp.where(moments > 0, moments, 1)
+    return xp.sum(0.005 * 10.0 ** xp.floor(xp.log10(positive)), axis=-1)
+
+
+def _moments_of(inertia, xp):
+    if inertia.shape[-2:] == (3, 3):
+        return xp.linalg.eigvalsh(0.5 * (inertia + xp.swapaxes(inertia, -1, -2)))
+    return inertia
+
+
+def _not_physical_message(name, slack=None):
+    by = "" if slack is None else f" by {slack:.3g},"
+    return (
+        f"`{name}` is not a physical body: it violates the triangle inequality I1 + I2 >= I3 (for "
+        f"every permutation) that every mass distribution satisfies,{by} more than the "
+        "rounding of three significant digits allows. Check the moments; to integrate a "
+        "mathematical test body anyway, pass jaxrot.MathematicalBody(inertia)."
+    )
+
+
+def _checked_in_graph(inertia, name, physical):
+    """``inertia`` with `eqx.error_if` checks of positive definiteness and, if ``physical``, the
+    triangle inequality within `triangle_tolerance`: raised when the compiled program runs."""
+    moments = _moments_of(inertia, jnp)
+    inertia = eqx.error_if(
+        inertia,
+        jnp.any(moments <= 0),
+        f"`{name}` must be positive definite (every principal moment > 0).",
+    )
+    if physical:
+        slack = jnp.sum(moments, axis=-1) - 2 * jnp.max(moments, axis=-1)
+        failed = jnp.any(slack < -triangle_tolerance(moments))
+        inertia = eqx.error_if(inertia, failed, _not_physical_message(name))
+    return inertia
+
+
+def check_inertia_values(inertia: np.ndarray, name="inertia", *, physical=True):
     if not np.all(np.isfinite(inertia)):
         raise ValueError(f"`{name}` contains NaN or infinite values.")
     if inertia.shape[-2:] == (3, 3):
@@ -164,22 +226,18 @@ def check_inertia_values(inertia: np.ndarray, name="inertia"):
                 f"`{name}` must be a symmetric tensor; the largest relative asymmetry is {asym:.3g}. "
                 "Pass (I + I.T) / 2 if the asymmetry is round-off."
             )
-        moments = np.linalg.eigvalsh(0.5 * (inertia + np.swapaxes(inertia, -1, -2)))
-    else:
-        moments = inertia
+    moments = _moments_of(inertia, np)
     if np.any(moments <= 0):
         raise ValueError(
             f"`{name}` must be positive definite (every principal moment > 0); "
             f"the smallest principal moment is {float(np.min(moments)):.3g}."
         )
-    # A real mass distribution has I_i + I_j >= I_k for every permutation.
-    total = np.sum(moments, axis=-1, keepdims=True)
-    slack = np.min(total - 2 * moments)
-    if slack < -1e-6 * float(np.max(total)):
-        raise ValueError(
-            f"`{name}` violates the triangle inequality I1 + I2 >= I3 (for every permutation) that "
-            f"every real mass distribution satisfies; worst margin {slack:.3g}. Check the moments."
-        )
+    if physical:
+        # A real mass distribution has I_i + I_j >= I_k for every permutation (within rounding).
+        slack = np.sum(moments, axis=-1) - 2 * np.max(moments, axis=-1)
+        excess = slack + triangle_tolerance(moments)
+        if np.any(excess < 0):
+            raise ValueError(_not_physical_message(name, -float(np.min(slack))))
     return moments
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxrot import analytic, quaternion as quat
-from jaxrot._rotor import free_rotor
+from jaxrot._rotor import free_rotor, substeps_for
 
 
 BODIES = ((1.0, 2.0, 3.0), (1.0, 1.0, 1.9), (1.0, 2.0, 2.0), (1.0, 1.5, 2.0), (0.5, 1.0, 1.2))
@@ -50,7 +50,7 @@ SPECIAL = {
     "symmetric_23": ((0.3, 1.0, 0.2), (1.0, 2.0, 2.0), 0.5),
     "steady_intermediate": ((0.0, 1.0, 0.0), (1.0, 2.0, 3.0), 0.5),
     "t_negative": ((0.3, 1.0, 0.2), (1.0, 2.0, 3.0), -0.5),
-    "too_long": ((0.3, 1.0, 0.2), (1.0, 2.0, 3.0), 4.0),  # |ω| t / 2 > 1: no DMV solution
+    "long_flow": ((0.3, 1.0, 0.2), (1.0, 2.0, 3.0), 4.0),  # |ω| t = 4.4: 22 DMV steps of 0.2 rad
     "needle_long": ((0.3, 1.0, 0.2), (1e-6, 1.0, 1.0), 0.3),  # modification lost to cancellation
     "needle_short": ((0.3, 1.0, 0.2), (1e-3, 1.0, 1.0), 0.3),
 }
@@ -88,9 +88,8 @@ def _errors(a, b):
 
 @pytest.mark.slow
 def test_matches_exact_motion_to_round_off():
-    """Two DMV10 steps: round-off (a few hundred ulp in both solutions) while |ω| |t| <= 0.3; above,
-    the truncation error of two steps of |ω|t/2, each at most the one-step error that the order test
-    below bounds (1e-8 at |ω| t = 0.6, slope 11): 2e-8 (|ω|t / 1.2)^11, 1.3e-12 at 0.5."""
+    """Round-off (a few hundred ulp in both solutions) at every |ω| |t|: the rotor takes steps of at
+    most 0.2 rad (`_bound`)."""
     inputs, exact, rotor, _, _ = results()
     angle, omega = _errors(_rows(rotor, 0, N_RANDOM), _rows(exact, 0, N_RANDOM))
     assert np.all(np.isfinite(angle)) and np.all(np.isfinite(omega))
@@ -99,8 +98,11 @@ def test_matches_exact_motion_to_round_off():
 
 
 def _bound(turn):
-    """The error bound of the test above at ``|ω| |t| = turn``."""
-    return 1e-13 + np.where(turn <= 0.3, 0, 2e-8 * (turn / 1.2) ** 11)
+    """The error bound at ``|ω| |t| = turn``: ``n = max(2, ⌈turn / 0.2⌉)`` DMV10 steps (`substeps_for`),
+    each within the one-step truncation bound of the order test below (1e-8 at 0.6 rad, slope 11)
+    and adding round-off (the 1e-13 of two steps, measured in both solutions, per two steps)."""
+    n = np.maximum(2, np.ceil(np.asarray(turn) / 0.2))
+    return 1e-13 * n / 2 + n * 1e-8 * (turn / n / 0.6) ** 11
 
 
 @pytest.mark.slow
@@ -166,7 +168,7 @@ def test_special_cases_closed_forms():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["symmetric_12", "symmetric_23", "t_negative", "needle_short"])
+@pytest.mark.parametrize("name", ["symmetric_12", "symmetric_23", "t_negative", "needle_short", "long_flow"])
 def test_special_cases_against_exact(name):
     (_, w, _, t), exact, rotor = _special(name)
     angle, omega = _errors(rotor, exact)
@@ -174,21 +176,85 @@ def test_special_cases_against_exact(name):
     assert angle < bound and omega < bound, (angle, omega, bound)
 
 
-@pytest.mark.parametrize("name", ["too_long", "needle_long"])
-def test_outside_valid_range_is_nan(name):
-    _, _, (q1, w1) = _special(name)
+def test_outside_valid_range_is_nan():
+    """The needle's modified moments lose their digits to cancellation: NaN, not noise."""
+    _, _, (q1, w1) = _special("needle_long")
     assert np.all(np.isnan(q1)) and np.all(np.isnan(w1))
 
 
 @pytest.mark.slow
 def test_substeps_argument():
-    (q, w, moments, t), exact, _ = _special("too_long")
+    (q, w, moments, t), exact, _ = _special("long_flow")
     with pytest.raises(ValueError, match="substeps"):
         free_rotor(q, w, moments, t, substeps=0)
-    # More substeps extend the valid range: |ω| t = 4 in 8 steps.
+    # A fixed count: one DMV step may turn by at most 1 rad, so two are NaN at |ω| t = 4.4, and
+    # eight (0.55 rad each) are the free motion to their truncation error, 8 × 1e-8 (0.55/0.6)^11.
+    assert np.all(np.isnan(free_rotor(q, w, moments, t, substeps=2)[0]))
     q8, w8 = free_rotor(q, w, moments, t, substeps=8)
     angle, omega = _errors((q8, w8), exact)
     assert angle < 1e-8 and omega < 1e-8, (angle, omega)
+
+
+def test_substeps_for_rule():
+    """At least two steps (the common range costs what it did), at most 64, ⌈|ω| t / a⌉ between."""
+    angles = jnp.array([0.0, 0.3, 0.4, 0.41, 1.0, 10.0, 1e3, jnp.inf])
+    np.testing.assert_array_equal(substeps_for(angles, jnp.float64), [2, 2, 2, 3, 5, 50, 64, 64])
+    np.testing.assert_array_equal(
+        substeps_for(angles.astype(jnp.float32), jnp.float32), [2, 2, 2, 2, 2, 20, 64, 64]
+    )
+
+
+FAST_BODIES = {"generic": (1.0, 2.0, 3.0), "sphere": (2.0, 2.0, 2.0), "symmetric": (1.0, 1.0, 1.9)}
+FAST_TURNS = (1.0, 3.15, 6.0, 10.0)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+@pytest.mark.parametrize("body", list(FAST_BODIES))
+def test_any_turn_up_to_ten_rad(body, dtype):
+    """Finite and exact to round-off for |ω| |t| up to 10 rad per flow, the step count chosen per body
+    (one batch mixes all turns). float64: `_bound`. float32 against the float64 exact flow: each of
+    the n <= 20 steps of <= 0.5 rad rounds ~10 operations (10 n eps in ω), and the orientation error
+    grows with the angle turned at that ω error: 10 n eps (1 + turn)."""
+    moments = jnp.asarray(FAST_BODIES[body])
+    q, w = _states(8, seed=5)
+    turns = np.repeat(FAST_TURNS, 2)
+    w = w * turns[:, None]
+    exact = jax.vmap(analytic.free_motion, (0, 0, None, None))(jnp.asarray(q), jnp.asarray(w), moments, 1.0)
+    args = (jnp.asarray(q, dtype), jnp.asarray(w, dtype), moments.astype(dtype), jnp.asarray(1.0, dtype))
+    got = jax.jit(free_rotor)(*args)
+    assert got[0].dtype == dtype
+    assert np.all(np.isfinite(got[0])) and np.all(np.isfinite(got[1]))
+    angle, omega = _errors(jax.tree.map(lambda a: a.astype(jnp.float64), got), exact)
+    if dtype == jnp.float64:
+        bound = _bound(turns)
+    else:
+        n = np.maximum(2, np.ceil(turns / 0.5))
+        bound = 10 * n * np.finfo(np.float32).eps * (1 + turns)
+    assert np.all(angle < bound) and np.all(omega / turns < bound), (angle, omega / turns, bound)
+
+
+@pytest.mark.slow
+def test_gradients_beyond_the_first_steps():
+    """The extra steps' derivative rule (a carried Jacobian) agrees with the exact solution's
+    derivatives, in reverse and forward mode, at 3 rad per flow (15 steps), within a batch that
+    mixes step counts. Tolerance: the values agree to ~1e-13 (`_bound`), derivatives amplify the
+    difference by the flow's sensitivity (~turn² here): 1e-9."""
+    q0 = jnp.asarray(_states(1, seed=9)[0][0])
+    moments = jnp.array([1.0, 2.0, 3.0])
+    w = jnp.array([[0.1, 0.2, -0.1], [0.9, 2.0, -2.0]])
+
+    def loss(fn):
+        def f(moments, w, t):
+            q1, w1 = fn(q0, w, moments, t)
+            return jnp.sum(jnp.sin(q1)) + jnp.sum(w1**2)
+
+        return f
+
+    for arg in range(3):
+        exact = jax.vmap(jax.grad(loss(analytic.free_motion), arg), (None, 0, None))(moments, w, 1.0)
+        for mode in (jax.grad, jax.jacfwd):
+            got = jax.vmap(mode(loss(free_rotor), arg), (None, 0, None))(moments, w, 1.0)
+            np.testing.assert_allclose(got, exact, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])

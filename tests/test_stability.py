@@ -51,25 +51,21 @@ LIMITS[("generic", "float64")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_
 LIMITS[("generic", "float32")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
 LIMITS[("needle", "float64")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
 LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
-# The splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): near-exact, up to where its
-# two sub-steps turn by more than 1 rad (NaN beyond: |ω|Δt > 2 over the largest rotor weight: 1 for
-# splitting, 0.6 for srkn6b), or, on the needle, up to where the modified moments' cancellation
-# passes the rotor's rounding bound (NaN beyond).
-for dtype in ("float64", "float32"):  # the same two DMV sub-steps in both
-    LIMITS[("generic", dtype)] |= {"splitting": 1.797, "srkn6b": 2.956, "srkn14a": 5.683}
+# The splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): exact to round-off on the
+# generic body at any |ω|Δt up to 10 (the rotor takes ⌈|ω|Δt / 0.2⌉ DMV steps per flow: no limit in
+# the table), and on the needle up to where the modified moments' cancellation passes the rotor's
+# rounding bound (NaN beyond; smaller DMV steps do not move it: the same limits as with two).
 LIMITS[("needle", "float64")] |= {"splitting": 0.03335, "srkn6b": 0.05515, "srkn14a": 0.1062}
 LIMITS[("needle", "float32")] |= {"splitting": 0.0213, "srkn6b": 0.03517, "srkn14a": 0.06773}
 # dexp⁻¹ has a pole at |Θ| = 2π: the Lie-group RK stages (|Θ_i| ≈ c_i |ω|Δt) stay finite below it,
 # and are NaN at 10 rad per step (measured finite up to 4.6 for rkmk4).
-FINITE_UP_TO = {"zhao": 3.0, "euler": 3.0, "srkn6b": 3.0, "srkn14a": 3.0}
+FINITE_UP_TO = {"zhao": 3.0, "euler": 3.0}
 FINITE_UP_TO |= {"rkmk4": 3.0, "rkmk_dopri5": 3.0, "rkmk_dopri8": 3.0}
 # These are NaN soon above their accuracy limit, where the error per step is already past the
-# criterion: "splitting", whose one rotor flow a step meets the DMV rotor's 1 rad per sub-step
-# (measured NaN from 1.05x the limit); on the needle, the splittings' rotor at its rounding bound,
+# criterion: on the needle, the splittings' rotor at its rounding bound,
 # and rkmk_dopri5/8, whose stages meet the pole of dexp⁻¹ once the 1/I₁-amplified spin error
 # reaches 2π (measured: NaN from 2-4x the limit).
-NAN_ABOVE_LIMIT = {("splitting", "generic")}
-NAN_ABOVE_LIMIT |= {(name, "needle") for name in (*ROTOR_SCHEMES, "rkmk_dopri5", "rkmk_dopri8")}
+NAN_ABOVE_LIMIT = {(name, "needle") for name in (*ROTOR_SCHEMES, "rkmk_dopri5", "rkmk_dopri8")}
 # The rotor's rounding bound is an estimate from the sizes of cancelling terms, whose rounding depends
 # on how the compiler orders them: the limit it sets moved by more than 5% between machines
 # (srkn6b on the needle: NaN from 1.28x the limit here, finite and accurate at 1.05x elsewhere).
@@ -95,6 +91,8 @@ def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     from 4.5 (needle) and 7.9 (generic body); "splitting" (its DMV rotor) just above its limit;
     ``Splitting(rotor="exact")`` is exact for a free body: the whole ladder passes."""
     scheme = Splitting(rotor="exact") if name == "splitting_exact" else name
+    if body == "generic":  # the published table quotes these
+        assert stability.LIMITS.get(name) == LIMITS[body, dtype].get(name)
     limit = LIMITS[body, dtype].get(name)
     band = BAND.get((body, dtype), 0.05)
     trusted = limit  # every rung below passes
@@ -114,7 +112,10 @@ def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     assert result.error_per_step[x <= 1e-8].max() < (1e-14 if dtype == "float64" else 2e-6)
     below, above = result.error_per_step[-2:]
     if limit is None:  # exact free rotation: far below the criterion at 5 and 10 rad per step
-        assert result.error_per_step.max() < (1e-13 if dtype == "float64" else 1e-4)
+        # The DMV rotor turns 10 rad in >= 50 steps of <= 0.2 rad per unit of its flows' total weight
+        # (<= 4, srkn14a): ~200 DMV steps of ~10 roundings each, 4.4e-13, x4 for the 8 steps' growth.
+        floor = 2e-12 if name in ROTOR_SCHEMES else 1e-13
+        assert result.error_per_step.max() < (floor if dtype == "float64" else 1e-4)
     else:
         assert below <= TOL < above
         # Every rung below the limit passes: the limit is the first crossing.
@@ -513,7 +514,7 @@ FAST = jaxrot.RotState(Q0, TUMBLING.omega / jnp.linalg.norm(TUMBLING.omega) * 1e
 
 
 def first_nonfinite_step(name, state, n_steps):
-    traj = jaxrot.rollout(name, state, MOMENTS, 1e-3, n_steps)
+    traj = jaxrot.rollout(name, state, MOMENTS, 1e-3, n_steps, check_finite=False)
     finite = np.all(np.isfinite(np.asarray(traj.q)), axis=-1) & np.all(
         np.isfinite(np.asarray(traj.omega)), -1
     )

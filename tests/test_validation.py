@@ -7,6 +7,8 @@ import pytest
 from helpers import MOMENTS, contract_params, principal_state
 
 import jaxrot
+from jaxrot import quaternion as quat
+from jaxrot._validation import triangle_tolerance
 
 
 GOOD = principal_state()
@@ -128,9 +130,9 @@ def test_n_steps_traced_is_rejected_clearly():
 
 @pytest.mark.slow
 def test_checks_skip_tracers_under_jit_and_grad():
-    """A non-unit q or a non-physical inertia under jit is the caller's business: no check, no error."""
+    """A non-unit q under jit is the caller's business (no check, no error); gradients stay finite."""
     off_unit = jaxrot.RotState(Q * 1.5, OMEGA)
-    out = jax.jit(lambda s, inertia: run(state=s, inertia=inertia))(off_unit, jnp.array([1.0, 1.0, 3.0]))
+    out = jax.jit(lambda s, inertia: run(state=s, inertia=inertia))(off_unit, MOMENTS)
     assert bool(jnp.all(jnp.isfinite(out.q)))
 
     def loss(inertia, dt):
@@ -146,3 +148,49 @@ def test_integer_and_list_inputs_are_converted_to_float():
     traj = jaxrot.rollout("zhao", jaxrot.RotState([1, 0, 0, 0], [0, 0, 1]), [1, 2, 2], 0.1, 2)
     assert jnp.issubdtype(traj.q.dtype, jnp.floating)
     np.testing.assert_allclose(traj.omega[-1], [0.0, 0.0, 1.0], atol=1e-15)
+
+
+# Hairer & Vilmart's water molecule, a planar body rounded to three digits: 0.345 + 0.653 = 0.998 < 1.
+WATER = jnp.array([0.345, 0.653, 1.0])
+# ACM TOMS Algorithm 903's test body: 1 + 1.0127 < 3.3062, a mathematical body no mass distribution has.
+TOMS_903 = jnp.array([1.0, 1.0127, 3.3062])
+
+
+def _last_q(inertia):
+    return jaxrot.rollout("zhao", jaxrot.RotState(Q, OMEGA), inertia, 0.01, 3).q[-1]
+
+
+def test_a_rounded_planar_body_is_accepted_eagerly_and_under_jit():
+    """Its violation (0.002) is within the rounding of three significant digits (0.006), both forms;
+    the same body under jit gives the same result (to the few ulp by which XLA may order the
+    3 steps' operations differently inside an outer jit)."""
+    eager = _last_q(WATER)
+    np.testing.assert_allclose(jax.jit(_last_q)(WATER), eager, rtol=0, atol=1e-14)
+    assert bool(jnp.all(jnp.isfinite(_last_q(jnp.diag(WATER)))))
+    np.testing.assert_allclose(jaxrot.rollout("zhao", jaxrot.RotState(Q, OMEGA), WATER, 0.01, 3).q[-1], eager)
+
+
+def test_a_mathematical_body_is_refused_alike_eagerly_and_under_jit_unless_opted_in():
+    with pytest.raises(ValueError, match=r"not a physical body.*by 1.29.*jaxrot.MathematicalBody"):
+        _last_q(TOMS_903)
+    with pytest.raises(jax.errors.JaxRuntimeError, match=r"not a physical body.*jaxrot.MathematicalBody"):
+        jax.block_until_ready(jax.jit(_last_q)(TOMS_903))
+    body = jaxrot.MathematicalBody(TOMS_903)
+    eager = _last_q(body)
+    assert bool(jnp.all(jnp.isfinite(eager)))
+    np.testing.assert_allclose(jax.jit(_last_q)(body), eager, rtol=0, atol=1e-14)
+    reference = jaxrot.reference_rollout(jaxrot.RotState(Q, OMEGA), body, jnp.array([0.0, 0.03]))
+    assert float(quat.angle_between(reference.q[-1], eager)) < 1e-5  # zhao's error after 3 steps
+
+
+def test_triangle_tolerance_is_the_rounding_of_three_digits():
+    """Half a unit in the third significant digit of each moment: 0.0005 + 0.0005 + 0.005 for water.
+    A violation just beyond it is refused; the opt-in still requires positive definiteness."""
+    assert float(triangle_tolerance(np.asarray(WATER))) == pytest.approx(0.006)
+    _last_q(jnp.array([1.0, 2.0, 3.014]))  # violation 0.014 within 0.005 × 3 (each moment in [1, 10))
+    with pytest.raises(ValueError, match="not a physical body"):
+        _last_q(jnp.array([1.0, 2.0, 3.02]))
+    with pytest.raises(ValueError, match="positive definite"):
+        _last_q(jaxrot.MathematicalBody(jnp.array([1.0, -1.0, 3.0])))
+    with pytest.raises(jax.errors.JaxRuntimeError, match="positive definite"):
+        jax.block_until_ready(jax.jit(_last_q)(jaxrot.MathematicalBody(jnp.array([1.0, -1.0, 3.0]))))

@@ -1,0 +1,15 @@
+"""The measured stability limits that `jaxrot.stability` publishes and `jaxrot.rollout` quotes."""
+
+# The largest |ω|Δt (rad) with an error per step <= 1e-3 rad on the default body, float64 (float32
+# measures the same), from `max_stable_rotation_per_step`; tests/test_stability.py checks each. The
+# splittings are absent: torque-free they are their exact-to-round-off rotor at any |ω|Δt up to 10.
+# `jaxrot.rollout` quotes them when a run returns a NaN.
+LIMITS = {
+    "zhao": 0.3449,
+    "rozmanov": 0.3253,
+    "euler": 0.09072,
+    "no_squish": 0.242,
+    "rkmk4": 0.7328,
+    "rkmk_dopri5": 1.396,
+    "rkmk_dopri8": 2.541,
+}
