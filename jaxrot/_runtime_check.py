@@ -124,6 +124,13 @@ def check_in_graph(report: StepReport, batch_shape, t0, dt, scheme_name):
 
 
 @jax.jit
+def _sums_finite(q, omega):
+    """One reduction: a NaN or an infinity anywhere makes a sum non-finite (so may an overflow of
+    large finite values, which `_nonfinite_summary` then clears)."""
+    return jnp.isfinite(jnp.sum(q)) & jnp.isfinite(jnp.sum(omega))
+
+
+@jax.jit
 def _nonfinite_summary(q, omega):
     """Over saved states ``(S, N, ·)``: whether any is non-finite, the first such saved index, the
     number of bodies affected, the largest ``|ω|`` among the finite states and in the first one."""
@@ -142,11 +149,14 @@ def _nonfinite_summary(q, omega):
 def nonfinite_message(traj, dt, scheme_name, caller="jaxrot.rollout", first_index=0) -> str | None:
     """The message for a concrete trajectory with a NaN or an infinity, or None when all is finite.
 
-    One jitted reduction over the saved states (measured: ~1% of the run that made them, see
-    `rollout`'s docstring). Names the first non-finite saved state, the bodies affected, the largest
+    One sum over the saved states, the details only when it is not finite. Measured (200-step
+    ``"zhao"`` run of 10⁴ bodies, float64, 2 cores): +13% of the run when it saves every step (the
+    sum reads the 112 MB it wrote once more), within the noise (±1%) when it saves every 10th. Names the first non-finite saved state, the bodies affected, the largest
     rotation per step seen before, and the scheme's measured stability limit with a step inside it.
     """
     q, omega = traj.q, traj.omega
+    if bool(_sums_finite(q, omega)):
+        return None
     n_saved = q.shape[0]
     any_bad, first, n_bad, max_speed, start_speed = (
         np.asarray(x) for x in _nonfinite_summary(q.reshape(n_saved, -1, 4), omega.reshape(n_saved, -1, 3))
