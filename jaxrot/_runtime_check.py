@@ -151,8 +151,9 @@ def nonfinite_message(traj, dt, scheme_name, caller="jaxrot.rollout", first_inde
 
     One sum over the saved states, the details only when it is not finite. Measured (200-step
     ``"zhao"`` run of 10⁴ bodies, float64, 2 cores): +13% of the run when it saves every step (the
-    sum reads the 112 MB it wrote once more), within the noise (±1%) when it saves every 10th. Names the first non-finite saved state, the bodies affected, the largest
-    rotation per step seen before, and the scheme's measured stability limit with a step inside it.
+    sum reads the 112 MB it wrote once more), within the noise (±1%) when it saves every 10th.
+    Names the first non-finite saved state, the bodies affected, the rotation per step seen, and
+    the scheme's measured stability limit with a step inside it.
     """
     q, omega = traj.q, traj.omega
     if bool(_sums_finite(q, omega)):
