@@ -173,7 +173,10 @@ def test_a_rounded_planar_body_is_accepted_eagerly_and_under_jit():
 def test_a_mathematical_body_is_refused_alike_eagerly_and_under_jit_unless_opted_in():
     with pytest.raises(ValueError, match=r"not a physical body.*by 1.29.*jaxrot.MathematicalBody"):
         _last_q(TOMS_903)
-    with pytest.raises(jax.errors.JaxRuntimeError, match=r"not a physical body.*jaxrot.MathematicalBody"):
+    # eqx.error_if raises through a host callback: jax reports it as JaxRuntimeError, or as a
+    # ValueError ("INTERNAL: CpuCallback error", seen in pytest-xdist workers); both carry the message.
+    runtime_error = (jax.errors.JaxRuntimeError, ValueError)
+    with pytest.raises(runtime_error, match=r"(?s)not a physical body.*jaxrot.MathematicalBody"):
         jax.block_until_ready(jax.jit(_last_q)(TOMS_903))
     body = jaxrot.MathematicalBody(TOMS_903)
     eager = _last_q(body)
@@ -192,5 +195,5 @@ def test_triangle_tolerance_is_the_rounding_of_three_digits():
         _last_q(jnp.array([1.0, 2.0, 3.02]))
     with pytest.raises(ValueError, match="positive definite"):
         _last_q(jaxrot.MathematicalBody(jnp.array([1.0, -1.0, 3.0])))
-    with pytest.raises(jax.errors.JaxRuntimeError, match="positive definite"):
+    with pytest.raises((jax.errors.JaxRuntimeError, ValueError), match="positive definite"):
         jax.block_until_ready(jax.jit(_last_q)(jaxrot.MathematicalBody(jnp.array([1.0, -1.0, 3.0]))))
