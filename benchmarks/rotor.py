@@ -4,9 +4,11 @@
    |ω| t = 0.3 per call), float64 and float32: `free_rotor`, `jaxrot.analytic.free_motion`, and
    one `"zhao"` step without torque, each iterated in one compiled `fori_loop` over the vmapped
    bodies, median of repeats (`jaxrot.comparison.time_compiled`), and the ratios to Zhao.
-2. Error against `free_motion` (largest orientation angle and ω component, random states with
-   |ω| = 1, several bodies) over |ω| t, for the default two substeps, three, one, and float32.
-3. Drift of |L| and of the energy over 10⁴ calls (64 bodies, |ω| t = 0.05, float32 and float64)
+2. What the rotor's per-body step count costs against a fixed two where both take two (the
+   common range, |ω| t = 0.3): the rotor and the "splitting" step, same-run interleaved ratios.
+3. Error against `free_motion` (largest orientation angle and ω component, random states with
+   |ω| = 1, several bodies) over |ω| t up to 10, for the default count, a fixed two, one, float32.
+4. Drift of |L| and of the energy over 10⁴ calls (64 bodies, |ω| t = 0.05, float32 and float64)
    with the principal-frame round trip a splitting makes between calls, rotor against free_motion.
 
     python benchmarks/rotor.py                 # a few minutes on 2 cores
@@ -16,7 +18,9 @@
 import argparse
 import os
 import platform
+import statistics
 import sys
+import time
 
 import jax
 
@@ -35,7 +39,7 @@ from jaxrot.comparison import time_compiled
 DTYPES = {"float64": jnp.float64, "float32": jnp.float32}
 MOMENTS = (1.0, 2.0, 3.0)
 BODIES = ((1.0, 2.0, 3.0), (1.0, 1.0, 1.9), (0.1, 1.0, 1.05), (1.0, 1.0, 1.0), (1e-3, 1.0, 1.0))
-ANGLES = (0.05, 0.1, 0.2, 0.3, 0.5, 0.6, 0.8, 1.0, 1.5, 1.9, 2.5)
+ANGLES = (0.05, 0.1, 0.2, 0.3, 0.5, 0.6, 0.8, 1.0, 1.5, 1.9, 2.5, 5.0, 10.0)
 
 
 def header():
@@ -101,10 +105,10 @@ def error_table(n_states=200):
         return jax.vmap(lambda *a: free_rotor(*a, substeps=n), in_axes=(0, 0, None, None))
 
     variants = {
-        "default (2 steps), float64": (steps(None), jnp.float64),
-        "3 steps, float64": (steps(3), jnp.float64),
+        "default (⌈|ω|t / 0.2⌉ steps, at least 2), float64": (steps(None), jnp.float64),
+        "2 steps (fixed), float64": (steps(2), jnp.float64),
         "1 step, float64": (steps(1), jnp.float64),
-        "default (2 steps), float32": (steps(None), jnp.float32),
+        "default (⌈|ω|t / 0.5⌉ steps, at least 2), float32": (steps(None), jnp.float32),
     }
     lines = []
     for label, (fn, dtype) in variants.items():
@@ -169,15 +173,76 @@ def drift_table():
     return "\n".join(lines)
 
 
+def choice_cost_table(n, rounds):
+    """The per-body step count against a fixed two (the rotor before), at |ω| t = 0.3 where both take
+    two steps: the rotor alone and the `"splitting"` step (torque-free and a heavy top), every
+    variant compiled first, then timed round-robin over ``rounds`` rounds (this VM's timings move
+    ±5-10% between runs: only same-run interleaved ratios count)."""
+    from jaxrot.schemes.splitting import Splitting
+
+    lines = [
+        "| dtype | program | fixed 2 [ns] | per body [ns] | per body / fixed 2 |",
+        "|---|---|---|---|---|",
+    ]
+    for name, dtype in DTYPES.items():
+        q, w = random_states(n, dtype)
+        moments = jnp.asarray(MOMENTS, dtype)
+        dt = jnp.asarray(0.3, dtype)
+        arm, down = jnp.asarray([0.0, 0.0, 0.5], dtype), jnp.asarray([0.0, 0.0, -1.0], dtype)
+
+        def gravity(t, q, w, a, arm=arm, down=down):
+            return jnp.cross(quat.rotate(q, arm), down)
+
+        programs = {}
+        for label, sub in (("fixed 2", 2), ("per body", None)):
+            scheme = Splitting(rotor_substeps=sub)
+
+            def rotor(s, sub=sub, moments=moments, dt=dt):
+                one = jax.vmap(lambda a, b: free_rotor(a, b, moments, dt, substeps=sub))
+                return jax.lax.fori_loop(0, 100, lambda i, s: one(*s), s)
+
+            def free(s, scheme=scheme, moments=moments, dt=dt):
+                return jaxrot.rollout(scheme, jaxrot.RotState(*s), moments, dt, 100, save_every=100).q[-1]
+
+            def top(s, scheme=scheme, moments=moments, dt=dt, gravity=gravity):
+                state = jaxrot.RotState(*s)
+                return jaxrot.rollout(scheme, state, moments, dt, 100, torque=gravity, save_every=100).q[-1]
+
+            for program, fn in (
+                ("rotor", rotor),
+                ("splitting, torque-free", free),
+                ("splitting, heavy top", top),
+            ):
+                programs[program, label] = jax.jit(fn).lower((q, w)).compile()
+        samples = {key: [] for key in programs}
+        for compiled in programs.values():
+            jax.block_until_ready(compiled((q, w)))
+        for _ in range(rounds):
+            for key, compiled in programs.items():
+                start = time.perf_counter()
+                jax.block_until_ready(compiled((q, w)))
+                samples[key].append((time.perf_counter() - start) / (100 * n) * 1e9)
+        for program in ("rotor", "splitting, torque-free", "splitting, heavy top"):
+            fixed, chosen = (statistics.median(samples[program, label]) for label in ("fixed 2", "per body"))
+            lines.append(f"| {name} | {program} | {fixed:.1f} | {chosen:.1f} | {chosen / fixed:.3f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, default=10_000, help="bodies for the cost table")
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--no-drift", action="store_true", help="skip the 10^4-call drift table")
+    parser.add_argument("--rounds", type=int, default=11, help="interleaved rounds of the choice-cost table")
     ns = parser.parse_args(argv)
     print(header())
     print(f"\nCost per particle-step, N = {ns.n}, I = {MOMENTS}, |ω| t = 0.3, median of {ns.repeats}")
     print(cost_table(ns.n, ns.repeats))
+    print(
+        f"\nWhat the per-body step count costs at |ω| t = 0.3 (both take two steps), N = {ns.n}, "
+        f"median of {ns.rounds} interleaved rounds"
+    )
+    print(choice_cost_table(ns.n, ns.rounds))
     print(error_table())
     if not ns.no_drift:
         print("\nRelative drift over 10^4 calls (|ω| t = 0.05, 64 bodies, principal-frame round trip)")

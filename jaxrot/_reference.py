@@ -9,6 +9,7 @@ import numpy as np
 from . import quaternion as quat
 from ._inertia import body_inertia
 from ._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
+from ._runtime_check import IntegrationError, nonfinite_message
 from ._sharding import particle_sharded
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_times, check_torque, check_values, is_concrete
@@ -107,7 +108,19 @@ def reference_rollout(
         "tolerances, or check the torque for blow-up.",
         error=RuntimeError,
     )
-    return unflatten_trajectory(traj, batch_shape)
+    traj = unflatten_trajectory(traj, batch_shape)
+    if is_concrete(traj):
+        text = nonfinite_message(
+            traj,
+            None,
+            "diffrax.Dopri8",
+            "jaxrot.reference_rollout",
+            advice="The adaptive solve reported success: the torque or the inertia made the motion "
+            "non-finite (check them; tighter tolerances will not help).",
+        )
+        if text is not None:
+            raise IntegrationError(text)
+    return traj
 
 
 @eqx.filter_jit

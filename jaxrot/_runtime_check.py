@@ -146,7 +146,9 @@ def _nonfinite_summary(q, omega):
     )
 
 
-def nonfinite_message(traj, dt, scheme_name, caller="jaxrot.rollout", first_index=0) -> str | None:
+def nonfinite_message(
+    traj, dt, scheme_name, caller="jaxrot.rollout", first_index=0, advice=None
+) -> str | None:
     """The message for a concrete trajectory with a NaN or an infinity, or None when all is finite.
 
     One sum over the saved states, the details only when it is not finite. Measured (200-step
@@ -164,8 +166,16 @@ def nonfinite_message(traj, dt, scheme_name, caller="jaxrot.rollout", first_inde
     )
     if not any_bad:
         return None
-    first, dt = int(first), float(np.asarray(dt))
+    first = int(first)
     n_bodies = math.prod(q.shape[1:-1])
+    where = (
+        f"{caller}(scheme={scheme_name!r}) returned a NaN or an infinity: first in saved state "
+        f"{first + first_index} (t = {float(np.asarray(traj.t[first])):.6g}), in {int(n_bad)} of "
+        f"{n_bodies} bodies."
+    )
+    if advice is not None:  # no fixed step to speak of (an adaptive solve)
+        return f"{where} {advice}"
+    dt = float(np.asarray(dt))
     rotation, start = float(max_speed) * dt, float(start_speed) * dt
     limit = LIMITS.get(scheme_name)
     if limit is None:
@@ -182,10 +192,7 @@ def nonfinite_message(traj, dt, scheme_name, caller="jaxrot.rollout", first_inde
             "first saved state's speed."
         )
     return (
-        f"{caller}(scheme={scheme_name!r}) returned a NaN or an infinity: first in saved state "
-        f"{first + first_index} "
-        f"(t = {float(np.asarray(traj.t[first])):.6g}), in {int(n_bad)} of {n_bodies} bodies. The rotation "
-        f"per step |ω|Δt was {start:.3g} rad at the first saved state, and at most {rotation:.3g} rad "
-        f"among the finite ones. {advice} "
+        f"{where} The rotation per step |ω|Δt was {start:.3g} rad at the first saved state, and at "
+        f"most {rotation:.3g} rad among the finite ones. {advice} "
         "runtime_check=True names the exact step; check_finite=False returns the values unchecked."
     )

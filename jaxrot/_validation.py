@@ -139,14 +139,18 @@ def check_inertia(inertia, batch_shape, dtype, name="inertia", *, runtime=True):
     are matched, are ``batch + (3, 3)``, ``(3, 3)``, ``batch + (3,)``, ``(3,)``.
     A `jaxrot.MathematicalBody` is unwrapped and exempt from the triangle inequality.
     Concrete values are checked now (``ValueError``); a traced shared inertia, with ``runtime``,
-    by the compiled program (the same tests and tolerance, raised when it runs), so that a body is
-    accepted or refused alike under ``jit`` and eagerly. A traced per-particle inertia is not: the
-    check would be a reduction over all bodies, which a sharded rollout would communicate.
+    for the triangle inequality by the compiled program (the same tolerance, raised when it runs),
+    so that a body is accepted or refused alike under ``jit`` and eagerly (a NumPy or Python
+    constant is checked now, even inside ``jit``). A traced per-particle inertia is not: the check
+    would be a reduction over all bodies, which a sharded rollout would communicate.
     """
     physical = not isinstance(inertia, MathematicalBody)
     if not physical:
         inertia = inertia.inertia
     declared_dtype(inertia, name)
+    # A NumPy or Python constant is checked now even inside `jit` (where jnp.asarray traces it).
+    concrete = is_concrete(inertia)
+    raw = np.asarray(inertia, dtype=np.float64) if concrete else None
     inertia = jnp.asarray(inertia)
     batch_shape = tuple(batch_shape)
     shape = inertia.shape
@@ -162,8 +166,8 @@ def check_inertia(inertia, batch_shape, dtype, name="inertia", *, runtime=True):
             f"or one per particle with the particle axes {batch_shape} in front; got shape {shape}."
         )
     inertia = inertia.astype(dtype)
-    if is_concrete(inertia):
-        moments = check_inertia_values(np.asarray(inertia, dtype=np.float64), name, physical=physical)
+    if concrete:
+        moments = check_inertia_values(raw, name, physical=physical)
         check_conditioning(moments, dtype, name)
     elif runtime and not per_particle:
         inertia = _checked_in_graph(inertia, name, physical)
@@ -200,19 +204,16 @@ def _not_physical_message(name, slack=None):
 
 
 def _checked_in_graph(inertia, name, physical):
-    """``inertia`` with `eqx.error_if` checks of positive definiteness and, if ``physical``, the
-    triangle inequality within `triangle_tolerance`: raised when the compiled program runs."""
+    """``inertia`` with an `eqx.error_if` check of the triangle inequality within
+    `triangle_tolerance` (if ``physical``), raised when the compiled program runs.
+
+    Positive definiteness is not checked here: central differences of a needle's tiny moment step
+    across zero, and the integrators themselves do not need it (they need 1/I)."""
+    if not physical:
+        return inertia
     moments = _moments_of(inertia, jnp)
-    inertia = eqx.error_if(
-        inertia,
-        jnp.any(moments <= 0),
-        f"`{name}` must be positive definite (every principal moment > 0).",
-    )
-    if physical:
-        slack = jnp.sum(moments, axis=-1) - 2 * jnp.max(moments, axis=-1)
-        failed = jnp.any(slack < -triangle_tolerance(moments))
-        inertia = eqx.error_if(inertia, failed, _not_physical_message(name))
-    return inertia
+    slack = jnp.sum(moments, axis=-1) - 2 * jnp.max(moments, axis=-1)
+    return eqx.error_if(inertia, jnp.any(slack < -triangle_tolerance(moments)), _not_physical_message(name))
 
 
 def check_inertia_values(inertia: np.ndarray, name="inertia", *, physical=True):

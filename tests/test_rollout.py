@@ -195,3 +195,17 @@ def test_the_finite_check_counts_bodies_and_spares_jit():
         jaxrot.rollout("zhao", batch, inertia, dt, 10000, save_every=10000)
     run = jax.jit(lambda s: jaxrot.rollout("zhao", s, inertia, dt, 10000, save_every=10000).q[-1])
     assert int(jnp.sum(~jnp.all(jnp.isfinite(run(batch)), axis=-1))) == 2
+
+
+def test_the_nonfinite_message_of_an_adaptive_solve():
+    """`reference_rollout` checks its result the same way, with advice for an adaptive solve (no dt)."""
+    from jaxrot._runtime_check import nonfinite_message
+
+    q = jnp.zeros((3, 2, 4)).at[..., 0].set(1.0).at[2, 1, 0].set(jnp.nan)
+    traj = jaxrot.Trajectory(jnp.array([0.0, 0.5, 1.0]), q, jnp.ones((3, 2, 3)))
+    text = nonfinite_message(traj, None, "diffrax.Dopri8", "jaxrot.reference_rollout", advice="Check.")
+    assert text == (
+        "jaxrot.reference_rollout(scheme='diffrax.Dopri8') returned a NaN or an infinity: first in "
+        "saved state 2 (t = 1), in 1 of 2 bodies. Check."
+    )
+    assert nonfinite_message(traj._replace(q=jnp.ones_like(q)), 0.1, "zhao") is None

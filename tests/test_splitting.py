@@ -133,7 +133,14 @@ def test_rotor_takes_as_many_steps_as_the_flow_needs():
             Splitting(**bad)
 
 
-@pytest.mark.parametrize("name", ["splitting", "srkn6b", "srkn14a"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "splitting",
+        pytest.param("srkn6b", marks=pytest.mark.slow),
+        pytest.param("srkn14a", marks=pytest.mark.slow),
+    ],
+)
 def test_fast_sphere_and_bodies_stay_finite_and_exact(name):
     """The reported case: a torque-free sphere at 3.15 rad per step (ω = (200, -230, 80), dt = 0.01,
     500 steps) returned NaN with two fixed DMV steps. Now every rotor scheme gives exp(ω t) ⊗ q0
