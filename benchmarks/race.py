@@ -46,9 +46,9 @@ import numpy as np
 
 import jaxrot
 from jaxrot import quaternion as quat
+from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot._inertia import body_inertia
 from jaxrot._particles import PARTICLES
-from jaxrot._reference import adaptive_solve
 from jaxrot.comparison import machine_info, plot_work_precision
 
 

@@ -1,4 +1,4 @@
-"""The fast free rotor (`jaxrot._rotor.free_rotor`) against the exact one and a Zhao step.
+"""The fast free rotor (`jaxrot._free_body._rotor.free_rotor`) against the exact one and a Zhao step.
 
 1. Cost per particle-step (ns) at N bodies (default 10⁴, I = (1, 2, 3), random orientations,
    |ω| t = 0.3 per call), float64 and float32: `free_rotor`, `jaxrot.analytic.free_motion`, and
@@ -32,7 +32,7 @@ import numpy as np
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat
-from jaxrot._rotor import free_rotor
+from jaxrot._free_body._rotor import free_rotor
 from jaxrot.comparison import time_compiled
 
 
@@ -132,7 +132,7 @@ def error_table(n_states=200):
                 )
                 cells.append(f"{err:.0e}")
             lines.append(f"| {body} | " + " | ".join(cells) + " |")
-    lines.append("(|ω| = 1, so the columns are |ω| t; NaN: outside the valid range, see jaxrot._rotor)")
+    lines.append("(|ω| = 1, so the columns are |ω| t; NaN: outside the valid range, see _free_body/_rotor)")
     return "\n".join(lines)
 
 

@@ -17,26 +17,26 @@ from . import (
     stability as stability,
     torques as torques,
 )
-from ._chunked import (
-    Checkpoint as Checkpoint,
-    load_checkpoint as load_checkpoint,
-    rollout_chunks as rollout_chunks,
-    save_checkpoint as save_checkpoint,
-)
-from ._drive import Drive as Drive
+from ._diffrax._reference import reference_rollout as reference_rollout
+from ._diffrax._solver import solver as solver
+from ._diffrax._term import RigidBodyTerm as RigidBodyTerm
 from ._fit import FitResult as FitResult, fit_inertia as fit_inertia
 from ._inertia import (
     BodyInertia as BodyInertia,
     MathematicalBody as MathematicalBody,
     body_inertia as body_inertia,
 )
+from ._integrate._chunked import (
+    Checkpoint as Checkpoint,
+    load_checkpoint as load_checkpoint,
+    rollout_chunks as rollout_chunks,
+    save_checkpoint as save_checkpoint,
+)
+from ._integrate._drive import Drive as Drive
+from ._integrate._rollout import rollout as rollout
+from ._integrate._runtime_check import IntegrationError as IntegrationError
 from ._particles import per_body as per_body
-from ._reference import reference_rollout as reference_rollout
-from ._rollout import rollout as rollout
-from ._runtime_check import IntegrationError as IntegrationError
-from ._solver import solver as solver
 from ._state import RotState as RotState, Trajectory as Trajectory
-from ._term import RigidBodyTerm as RigidBodyTerm
 from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
 

@@ -3,7 +3,7 @@ r"""Exact torque-free rigid-body motion (Euler–Poinsot), for tests and splitti
 `free_top` returns the exact orientation and angular velocity of a torque-free
 rigid body with any inertia, at any times, to round-off: the symmetric top in
 closed form, the asymmetric top with Jacobi elliptic functions and the
-incomplete elliptic integral of the third kind (`jaxrot._elliptic`).
+incomplete elliptic integral of the third kind (`jaxrot._free_body._elliptic`).
 `free_motion` is the single-body core, in the principal frame, that
 `jaxrot.schemes.splitting.Splitting` calls once per step.
 
@@ -91,9 +91,9 @@ import jax
 import jax.numpy as jnp
 
 from . import quaternion as quat
-from ._free_motion import free_motion as free_motion
+from ._free_body._free_motion import free_motion as free_motion
+from ._free_body._principal_axes import principal_axes as principal_axes
 from ._particles import flatten_particles, unflatten_trajectory
-from ._principal_axes import principal_axes as principal_axes
 from ._state import RotState, Trajectory
 from ._validation import check_bodies, check_times
 

@@ -33,9 +33,9 @@ import numpy as np
 from tqdm import tqdm
 
 from . import quaternion as quat
+from ._diffrax._reference import adaptive_solve, reference_rollout
+from ._integrate._rollout import rollout
 from ._particles import flatten_particles, split_per_body
-from ._reference import adaptive_solve, reference_rollout
-from ._rollout import rollout
 from ._validation import check_bodies
 from .scenes import SCENES
 from .schemes import SCHEMES

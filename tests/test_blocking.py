@@ -1,4 +1,4 @@
-"""Cache blocking (`jaxrot._blocking`): the same bits as the unblocked loop, never for coupled bodies."""
+"""Cache blocking (`jaxrot._integrate._blocking`): bit-identical to the unblocked loop; never coupled."""
 
 import jax
 import jax.numpy as jnp
@@ -7,7 +7,8 @@ import pytest
 from helpers import MOMENTS, assert_same, contract_params, driven_problem, rotor_flows
 
 import jaxrot
-from jaxrot import _blocking, _run, quaternion as quat
+from jaxrot import quaternion as quat
+from jaxrot._integrate import _blocking, _run
 
 
 @pytest.fixture

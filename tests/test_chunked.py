@@ -132,7 +132,7 @@ def test_progress_bar_draws_and_changes_nothing(capsys):
     assert "rollout zhao" in err and "10/10" in err  # counts steps
     assert_same(with_bar, one)
     # The default is about 100 chunks of whole saves.
-    from jaxrot._chunked import default_chunk_steps
+    from jaxrot._integrate._chunked import default_chunk_steps
 
     assert default_chunk_steps(10_000, 10) == 100 and default_chunk_steps(1001, 1) == 11
     assert default_chunk_steps(5, 2) == 2 and default_chunk_steps(0, 1) == 1

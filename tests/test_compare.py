@@ -14,7 +14,7 @@ import pytest
 
 import jaxrot
 from jaxrot import comparison, quaternion as quat
-from jaxrot._reference import adaptive_solve
+from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot.comparison import (
     ADAPTIVE_SOLVERS,
     compare,

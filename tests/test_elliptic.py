@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import integrate, special
 
-from jaxrot import _elliptic as ell
+from jaxrot._free_body import _elliptic as ell
 
 
 # Parameters the free top uses: m from 0 (symmetric limit) to 1 − 1e-9 (near the separatrix),

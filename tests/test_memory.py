@@ -8,7 +8,7 @@ import pytest
 from helpers import contract_params
 
 import jaxrot
-from jaxrot import _blocking, _run
+from jaxrot._integrate import _blocking, _run
 
 
 def compiled_memory(scheme, n_bodies, n_steps, save_every):

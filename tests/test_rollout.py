@@ -199,7 +199,7 @@ def test_the_finite_check_counts_bodies_and_spares_jit():
 
 def test_the_nonfinite_message_of_an_adaptive_solve():
     """`reference_rollout` checks its result the same way, with advice for an adaptive solve (no dt)."""
-    from jaxrot._runtime_check import nonfinite_message
+    from jaxrot._integrate._runtime_check import nonfinite_message
 
     q = jnp.zeros((3, 2, 4)).at[..., 0].set(1.0).at[2, 1, 0].set(jnp.nan)
     traj = jaxrot.Trajectory(jnp.array([0.0, 0.5, 1.0]), q, jnp.ones((3, 2, 3)))

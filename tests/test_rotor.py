@@ -1,4 +1,4 @@
-"""The fast free rotor `jaxrot._rotor.free_rotor` against the exact `jaxrot.analytic.free_motion`.
+"""The fast free rotor `jaxrot._free_body._rotor.free_rotor` against the exact `jaxrot.analytic.free_motion`.
 
 Every test reads the shared batches below, evaluated once per dtype (each compiled program costs
 seconds on 2 cores): random states with |ω| = 1 for several bodies and times, plus the special
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxrot import analytic, quaternion as quat
-from jaxrot._rotor import free_rotor, substeps_for
+from jaxrot._free_body._rotor import free_rotor, substeps_for
 
 
 BODIES = ((1.0, 2.0, 3.0), (1.0, 1.0, 1.9), (1.0, 2.0, 2.0), (1.0, 1.5, 2.0), (0.5, 1.0, 1.2))

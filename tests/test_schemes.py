@@ -156,7 +156,7 @@ def test_float32_round_off_accumulates_slowly(name):
 
 # Measured |L| drift after 1e5 float32 steps of a free body (dt = 0.01, t = 1000), with the bound
 # each must stay under. The splittings' DMV rotor corrects its output to the input's invariants
-# (jaxrot._rotor), so what is left is an unbiased random walk of a few ulp per rotor flow:
+# (jaxrot._free_body._rotor), so what is left is an unbiased random walk of a few ulp per rotor flow:
 # 10 eps sqrt(flows) bounds it (the elliptic rotor, `Splitting(rotor="exact")`, drifted 7.7e-3 here).
 FLOAT32_MOMENTUM_DRIFT = {"zhao": 1e-3, "rozmanov": 1e-3, "no_squish": 1e-3}
 FLOAT32_MOMENTUM_DRIFT |= {

@@ -8,7 +8,7 @@ from helpers import MOMENTS, assert_same, contract_params, driven_problem, rotor
 from jax.sharding import AxisType, NamedSharding, PartitionSpec as P
 
 import jaxrot
-from jaxrot import _blocking
+from jaxrot._integrate import _blocking
 
 
 N_DEVICES = 4

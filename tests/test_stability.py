@@ -19,7 +19,7 @@ from helpers import ROTOR_SCHEMES, compiled_for_a_long_run, contract_params, rot
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat, stability
-from jaxrot._elliptic import ellipk
+from jaxrot._free_body._elliptic import ellipk
 from jaxrot.scenes import gravity_torque
 from jaxrot.schemes import AbstractScheme, Rozmanov, Splitting
 
@@ -51,7 +51,7 @@ LIMITS[("generic", "float64")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_
 LIMITS[("generic", "float32")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
 LIMITS[("needle", "float64")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
 LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
-# The splittings, torque-free, are their DMV10 rotor (jaxrot._rotor): exact to round-off on the
+# The splittings, torque-free, are their DMV10 rotor (jaxrot._free_body._rotor): exact to round-off on the
 # generic body at any |ω|Δt up to 10 (the rotor takes ⌈|ω|Δt / 0.2⌉ DMV steps per flow: no limit in
 # the table), and on the needle up to where the modified moments' cancellation passes the rotor's
 # rounding bound (NaN beyond; smaller DMV steps do not move it: the same limits as with two).
@@ -475,7 +475,7 @@ LONG_RUN = {
     # Energy: a random walk of round-off over the 10^6 steps, 5 sqrt(n) eps = 6e-4 (measured 8.1e-5 at
     # XLA's -O3, 2.8e-4 at the -O0 of conftest.py on two machines: the roundings differ by level).
     ("no_squish", "float32"): (NORM["float32"], 5 * 1000 * EPS["float32"], 6e-4),  # [8.4e-8, .., 3.0e-4]
-    # The DMV rotor's round-off is an unbiased random walk (jaxrot._rotor): 10 sqrt(n) eps over 10^5.
+    # The DMV rotor's round-off is an unbiased random walk (jaxrot._free_body._rotor): 10 √n eps over 10^5.
     ("splitting", "float32"): (NORM["float32"], WALK["float32"], WALK["float32"]),  # [6.6e-8, 6.4e-5, 1.2e-4]
     # Lie-group RK: they carry L, unchanged by a free step; the diagnostic rebuilds it, as for rozmanov.
     # Float32 energy: round-off of 10^6 steps, at 5× the measured (the ISA moves it by up to ~1.5×).
@@ -487,7 +487,7 @@ LONG_RUN = {
     ("rkmk_dopri5", "float32"): (NORM["float32"], 1e-3, L_REBUILT["float32"]),  # [9.7e-8, 1.9e-4, 1.4e-6]
     ("rkmk_dopri8", "float32"): (NORM["float32"], 1e-3, L_REBUILT["float32"]),  # [9.0e-8, 1.9e-4, 1.5e-6]
     # RKN splittings: their rotor's round-off is a random walk with a few-ulp correction per call
-    # (jaxrot._rotor); bounded like splitting, 10 ulp a step, over 10^5 steps.
+    # (jaxrot._free_body._rotor); bounded like splitting, 10 ulp a step, over 10^5 steps.
     ("srkn6b", "float64"): (NORM["float64"], SPLIT["float64"], SPLIT["float64"]),  # [7.7e-13, 7.2e-13]
     ("srkn14a", "float64"): (NORM["float64"], SPLIT["float64"], SPLIT["float64"]),  # [2.0e-12, 2.0e-12]
     ("srkn6b", "float32"): (NORM["float32"], SPLIT["float32"], SPLIT["float32"]),  # 10^6: [1.5e-3, 2.7e-3]

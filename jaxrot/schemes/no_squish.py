@@ -6,9 +6,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._free_body._principal_axes import principal_axes
 from .._fusion import stage
 from .._inertia import BodyInertia, body_inertia
-from .._principal_axes import principal_axes
 from .._state import RotState
 from .._trig import sincos
 from ._base import AbstractScheme, world_torque

@@ -6,10 +6,10 @@ import equinox as eqx
 import jax
 
 from .. import quaternion as quat
-from .._free_motion import free_motion
+from .._free_body._free_motion import free_motion
+from .._free_body._principal_axes import principal_axes
+from .._free_body._rotor import free_rotor
 from .._inertia import body_inertia
-from .._principal_axes import principal_axes
-from .._rotor import free_rotor
 from .._state import RotState
 from ._base import AbstractScheme, world_torque
 
@@ -44,7 +44,7 @@ def _kick(q_principal, moments, impulse):
 class AbstractRotorSplitting(AbstractScheme):
     """What the splittings share: the choice of free rotor and a `SplittingCarry` in the principal frame.
 
-    ``rotor`` (static): ``"dmv"`` (`jaxrot._rotor.free_rotor`) or ``"exact"``
+    ``rotor`` (static): ``"dmv"`` (`jaxrot._free_body._rotor.free_rotor`) or ``"exact"``
     (`jaxrot.analytic.free_motion`); see `Splitting` for their ranges and costs.
     ``rotor_substeps`` (static, ``"dmv"`` only): None (default) lets each body take the DMV
     steps its flow needs (``⌈|ω| t / 0.2⌉`` in float64, ``/ 0.5`` in float32, 2 to 64: exact to
@@ -100,7 +100,7 @@ class Splitting(AbstractRotorSplitting):
     The rotor (the field ``rotor``):
 
     - ``"dmv"`` (default): the preprocessed discrete Moser–Veselov map of Hairer and
-      Vilmart (`jaxrot._rotor.free_rotor`, order 10), in as many DMV steps as the flow
+      Vilmart (`jaxrot._free_body._rotor.free_rotor`, order 10), in as many DMV steps as the flow
       needs (two up to ``|ω| Δt = 0.4``): exact to round-off up to 10 rad per step, finite
       to 64; the whole step costs ~3 ``"zhao"`` steps (float64). ``rotor_substeps`` fixes
       the count (see `AbstractRotorSplitting`).

@@ -46,7 +46,7 @@ import equinox as eqx
 import jax
 from jax.sharding import AxisType, Mesh, NamedSharding, PartitionSpec
 
-from ._state import Trajectory
+from .._state import Trajectory
 
 
 class ParticleLayout(NamedTuple):

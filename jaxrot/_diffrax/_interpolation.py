@@ -22,8 +22,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from . import quaternion as quat
-from ._state import RotState
+from .. import quaternion as quat
+from .._state import RotState
 
 
 class GroupInterpolation(diffrax.AbstractLocalInterpolation):

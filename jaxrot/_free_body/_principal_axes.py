@@ -2,7 +2,7 @@
 
 import jax.numpy as jnp
 
-from . import quaternion as quat
+from .. import quaternion as quat
 
 
 def principal_axes(inertia):

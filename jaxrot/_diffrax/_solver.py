@@ -14,13 +14,13 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from . import quaternion as quat
+from .. import quaternion as quat
+from .._state import RotState
+from ..schemes import AbstractLieRungeKutta, AbstractScheme, resolve_scheme
+from ..schemes._base import world_torque
+from ..schemes._lie_runge_kutta import _combination, _momentum, exp_and_dexpinv
 from ._interpolation import hermite_interpolation, stage_interpolation
-from ._state import RotState
 from ._term import RigidBodyTerm
-from .schemes import AbstractLieRungeKutta, AbstractScheme, resolve_scheme
-from .schemes._base import world_torque
-from .schemes._lie_runge_kutta import _combination, _momentum, exp_and_dexpinv
 
 
 def _check_term(terms, y0) -> tuple[RigidBodyTerm, Any]:

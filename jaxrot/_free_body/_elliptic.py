@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ._validation import float_dtype
+from .._validation import float_dtype
 
 
 __all__ = ["ellipj", "ellipk", "ellipkinc", "ellippi", "elliprf", "elliprj"]
@@ -109,7 +109,7 @@ def ellipj(u, m):
     ``[0, 1]``.
 
     Example:
-        >>> from jaxrot._elliptic import ellipj
+        >>> from jaxrot._free_body._elliptic import ellipj
         >>> sn, cn, dn, ph = ellipj(0.5, 0.3)
         >>> print(round(float(sn), 6), round(float(dn), 6))
         0.474216 0.965679
@@ -343,7 +343,7 @@ def ellipk(m):
     ``K(m) = R_F(0, 1 − m, 1)``; ``inf`` at ``m = 1``, NaN for ``m > 1``.
 
     Example:
-        >>> from jaxrot._elliptic import ellipk
+        >>> from jaxrot._free_body._elliptic import ellipk
         >>> print(round(float(ellipk(0.5)), 10))
         1.8540746773
     """
@@ -385,7 +385,7 @@ def ellippi(n, phi, m):
     NaN outside.
 
     Example:
-        >>> from jaxrot._elliptic import ellippi
+        >>> from jaxrot._free_body._elliptic import ellippi
         >>> print(round(float(ellippi(0.0, 1.0, 0.0)), 12))  # Π(0; φ|0) = φ
         1.0
     """

@@ -3,7 +3,7 @@
 `free_motion` advances one body by a time ``t`` exactly (Euler–Poinsot): the
 short-flight Taylor series, the symmetric top in closed form, the asymmetric top
 with Jacobi elliptic functions and the incomplete elliptic integral of the third
-kind (`jaxrot._elliptic`), and the linearised motions that give true derivatives
+kind (`jaxrot._free_body._elliptic`), and the linearised motions that give true derivatives
 where the closed forms' are not. The cases, their formulas and the derivatives
 are described in `jaxrot.analytic`, which re-exports `free_motion` and runs it for
 many bodies and times (`jaxrot.analytic.free_top`); the splitting schemes call it
@@ -20,7 +20,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from . import _elliptic as ell, quaternion as quat
+from .. import quaternion as quat
+from . import _elliptic as ell
 
 
 def _qz(angle):

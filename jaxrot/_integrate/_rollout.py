@@ -1,14 +1,14 @@
-"""`rollout`: a whole run in one call, or in chunks for a progress bar (`jaxrot._chunked`).
+"""`rollout`: a whole run in one call, or in chunks for a progress bar (`jaxrot._integrate._chunked`).
 
 The time loop (one `lax.scan` over time, `vmap` over particles, bodies in cache-sized
-blocks) and the argument checks are the shared core in `jaxrot._run`.
+blocks) and the argument checks are the shared core in `jaxrot._integrate._run`.
 """
 
+from .._particles import unflatten_trajectory
+from .._state import RotState
 from ._chunked import chunked_rollout
-from ._particles import unflatten_trajectory
 from ._run import prepare_run
 from ._sharding import particle_sharded
-from ._state import RotState
 
 
 @particle_sharded

@@ -21,7 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._particles import PARTICLES
+from .._particles import PARTICLES
 
 
 BLOCK_BODIES = 16384

@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._particles import unflatten_trajectory
+from .._particles import unflatten_trajectory
+from .._state import RotState, Trajectory
+from .._validation import check_count, is_concrete
 from ._run import Run, prepare_run
-from ._state import RotState, Trajectory
-from ._validation import check_count, is_concrete
 
 
 # Bumped when the file layout changes, so that an old file is rejected with a clear message.

@@ -81,7 +81,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ._fusion import stage, stage_stacked
+from .._fusion import stage, stage_stacked
 
 
 __all__ = ["free_rotor"]
@@ -466,7 +466,7 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     Example:
         >>> import jax.numpy as jnp
         >>> from jaxrot import quaternion as quat
-        >>> from jaxrot._rotor import free_rotor
+        >>> from jaxrot._free_body._rotor import free_rotor
         >>> q0, w0 = jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, 1.0, 0.2])
         >>> moments = jnp.array([1.0, 2.0, 3.0])
         >>> q1, w1 = free_rotor(q0, w0, moments, 0.4)  # exact: ω(0.4) = (0.221306, 1.017589, 0.180718)

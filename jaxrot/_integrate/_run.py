@@ -2,8 +2,8 @@
 
 `prepare_run` checks a rollout's arguments (before anything compiles) and flattens
 its particle axes into a `Run`; `Run.flat` runs the compiled time loop,
-`_rollout_flat`, from an initial state or from a carry. `jaxrot._rollout` runs it in
-one call and `jaxrot._chunked` a chunk at a time; this module imports neither.
+`_rollout_flat`, from an initial state or from a carry. `jaxrot._integrate._rollout` runs it in
+one call and `jaxrot._integrate._chunked` a chunk at a time; this module imports neither.
 """
 
 import math
@@ -14,10 +14,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._inertia import body_inertia
+from .._particles import PARTICLES, flatten_particles, split_per_body
+from .._state import RotState, Trajectory
+from .._validation import check_bodies, check_count, check_dt, check_save_every, check_torque, is_concrete
+from ..schemes import resolve_scheme
 from . import _blocking
 from ._drive import check_drive, driven_step, driven_torque
-from ._inertia import body_inertia
-from ._particles import PARTICLES, flatten_particles, split_per_body
 from ._runtime_check import (
     IntegrationError,
     check_in_graph,
@@ -27,9 +30,6 @@ from ._runtime_check import (
     update_report,
 )
 from ._sharding import particle_shards, shard_particles
-from ._state import RotState, Trajectory
-from ._validation import check_bodies, check_count, check_dt, check_save_every, check_torque, is_concrete
-from .schemes import resolve_scheme
 
 
 class Run(NamedTuple):
@@ -137,7 +137,7 @@ def prepare_run(
     args, args_axes = split_per_body(args, batch_shape)
     if drive_per_particle:
         drive = jax.tree_util.tree_map(lambda x: x.reshape(-1, 3), drive)
-    # Sharded particles: each device keeps its own bodies (`jaxrot._sharding`).
+    # Sharded particles: each device keeps its own bodies (`jaxrot._integrate._sharding`).
     flat_state, inertia, args, drive = shard_particles(
         (flat_state, inertia, args, drive),
         (0, 0 if per_particle else None, args_axes, 0 if drive_per_particle else None),
@@ -197,9 +197,9 @@ def _rollout_flat(
     ``state`` is then None, ``save_offset`` (a traced integer, so that every chunk of
     one size shares one compilation) is the number of saves already done, and only
     the ``n_saves`` new states are returned, with times and step numbers counted from
-    ``t0`` exactly as in one call (`jaxrot._chunked`).
+    ``t0`` exactly as in one call (`jaxrot._integrate._chunked`).
 
-    With ``n_blocks > 1`` (bodies that no torque couples, `jaxrot._blocking`) the
+    With ``n_blocks > 1`` (bodies that no torque couples, `jaxrot._integrate._blocking`) the
     bodies go through the whole time loop one block at a time, each block's stages in
     cache: the same arithmetic per body (the same bits but for ``"splitting"``).
 

@@ -1,0 +1,4 @@
+"""jaxrot inside diffrax.
+
+The rigid-body term, the schemes as diffrax solvers, their interpolation, and the reference solver.
+"""
