@@ -20,7 +20,13 @@ from . import (
 from ._diffrax._reference import reference_rollout as reference_rollout
 from ._diffrax._solver import solver as solver
 from ._diffrax._term import RigidBodyTerm as RigidBodyTerm
-from ._fit import FitResult as FitResult, fit_inertia as fit_inertia
+from ._fit import (
+    Experiment as Experiment,
+    FitResult as FitResult,
+    Identification as Identification,
+    fit_inertia as fit_inertia,
+    identify as identify,
+)
 from ._inertia import (
     BodyInertia as BodyInertia,
     MathematicalBody as MathematicalBody,

@@ -19,7 +19,13 @@ One concept per module: `_parameterisation` (the physical tensor parameters),
 `_optimiser` (Gauss–Newton) and `_fit_inertia` (the entry point).
 """
 
+from ._experiment import Experiment as Experiment
 from ._fit_inertia import FitResult as FitResult, fit_inertia as fit_inertia
+from ._identify import (
+    Identification as Identification,
+    StandardErrors as StandardErrors,
+    identify as identify,
+)
 from ._initial import estimate_omega as estimate_omega
 from ._objective import (
     _objective as _objective,

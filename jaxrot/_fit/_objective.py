@@ -119,35 +119,44 @@ def _value_and_grad(params, problem):
     return jax.value_and_grad(_objective)(params, problem)
 
 
+def sample_states(scheme, torque, args, inertia, q0, omega0, t, substeps):
+    """States ``q (n, 4)``, ``ω (n, 3)`` at the sample times ``t (n,)``, ``substeps`` steps per interval.
+
+    ``inertia`` is a prepared `BodyInertia`. Repeating the last time pads ``t``:
+    a step of length zero leaves the state as it is.
+    """
+
+    def interval(inner, k):
+        dt = (t[k + 1] - t[k]) / substeps
+
+        def one_step(inner, i):
+            time = t[k] + i.astype(dt.dtype) * dt
+            return scheme.step(inner, time, dt, inertia, torque, args), None
+
+        inner, _ = jax.lax.scan(one_step, inner, jnp.arange(substeps))
+        return inner, scheme.state(inner)
+
+    state0 = RotState(q0, omega0)
+    _, states = jax.lax.scan(
+        interval, scheme.init(state0, t[0], inertia, torque, args), jnp.arange(t.shape[0] - 1)
+    )
+    return jnp.concatenate([q0[None], states.q]), jnp.concatenate([omega0[None], states.omega])
+
+
 def _predict(params, problem):
     """Modelled states at the (padded) observation times of every segment: ``(K, P + 1, ...)``."""
     inertia, q_start = _unpack(params, problem)
     prepared = body_inertia(inertia)
-    scheme, torque, args, s = problem.scheme, problem.torque, problem.args, problem.substeps
 
     def segment(q0, omega0, t):
-        def interval(inner, k):
-            dt = (t[k + 1] - t[k]) / s
-
-            def one_step(inner, i):
-                time = t[k] + i.astype(dt.dtype) * dt
-                return scheme.step(inner, time, dt, prepared, torque, args), None
-
-            inner, _ = jax.lax.scan(one_step, inner, jnp.arange(s))
-            return inner, scheme.state(inner)
-
-        state0 = RotState(q0, omega0)
-        _, states = jax.lax.scan(
-            interval, scheme.init(state0, t[0], prepared, torque, args), jnp.arange(t.shape[0] - 1)
+        return sample_states(
+            problem.scheme, problem.torque, problem.args, prepared, q0, omega0, t, problem.substeps
         )
-        q = jnp.concatenate([q0[None], states.q])
-        omega = jnp.concatenate([omega0[None], states.omega])
-        return q, omega
 
     return jax.vmap(segment)(q_start, params.omega, problem.data.t)
 
 
-def _signed_vector(q, q_ref):
+def signed_vector(q, q_ref):
     """``2 v sign(w)`` of ``q_ref* ⊗ q = (w, v)``: its squared norm is `_orientation_misfit`."""
     d = quat.multiply(quat.conjugate(q_ref), q)
     return 2 * jnp.where(d[..., :1] < 0, -d[..., 1:], d[..., 1:])
@@ -159,13 +168,13 @@ def _residuals(params, problem):
     q, omega = _predict(params, problem)
     d = problem.data
     scale = jnp.sqrt(d.weight / jnp.sum(d.weight))[..., None]
-    parts = [(scale * _signed_vector(q, d.q)).reshape(-1)]
+    parts = [(scale * signed_vector(q, d.q)).reshape(-1)]
     if d.omega is not None:
         parts.append((scale * jnp.sqrt(problem.omega_weight) * (omega - d.omega)).reshape(-1))
     n_seg = q.shape[0]
     if n_seg > 1:
         _, q_start = _unpack(params, problem)
         joint = jnp.sqrt(problem.continuity_weight / (n_seg - 1))
-        parts.append((joint * _signed_vector(q[:-1, -1], q_start[1:])).reshape(-1))
+        parts.append((joint * signed_vector(q[:-1, -1], q_start[1:])).reshape(-1))
         parts.append((joint * problem.spacing * (omega[:-1, -1] - params.omega[1:])).reshape(-1))
     return jnp.concatenate(parts), q, omega

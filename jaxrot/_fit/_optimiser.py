@@ -44,6 +44,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optax
 import optimistix as optx
@@ -69,7 +70,7 @@ class _Optimised(NamedTuple):
 class _DampedGaussNewton(optx.AbstractGaussNewton):
     """Gauss–Newton (Newton descent on ``JᵀJ``) with a backtracking Armijo search from the full step."""
 
-    rtol: float = 0.0  # unused: `_gauss_newton` decides when to stop
+    rtol: float = 0.0  # unused: `gauss_newton` decides when to stop
     atol: float = 0.0
     norm: Callable = optx.max_norm
     descent: optx.NewtonDescent = optx.NewtonDescent()
@@ -125,21 +126,33 @@ def _forward_jacobian(residuals):
     return fn
 
 
+def _inertia_residuals(z, data):
+    """`fit_inertia`'s residual vector at the free coordinates ``z`` (the rest of ``x`` fixed)."""
+    x, free, like, problem = data
+    return _residuals(_unflat(x.at[free].set(z), like, z.dtype), problem)[0]
+
+
 @eqx.filter_jit
-def _gauss_newton(z0, x, free, like, problem, ftol, floor, max_iter: int):
-    """Gauss–Newton from ``z0`` over the ``free`` coordinates of ``x``: ``(z, history, n, converged)``.
+def gauss_newton(residual_fn, z0, data, ftol, floor, max_iter: int, minimum_norm: bool = False):
+    """Gauss–Newton on ``residual_fn(z, data)`` from ``z0``: ``(z, history, n, converged, r, J)``.
 
     ``history[k]`` is the objective (the sum of squared residuals) at iterate ``k``
     for ``k ≤ n``. Converged: the objective is at most ``floor``, or the decrease
     that the Gauss–Newton model predicts for the next full step, ``|J d|²``, is at
-    most ``ftol ×`` the objective.
+    most ``ftol ×`` the objective. ``residual_fn`` is static (a module-level
+    function); ``data`` is a pytree of its arrays and static configuration.
+    ``r`` and ``J`` are the residuals and their Jacobian at ``z`` (the last
+    accepted iterate), which the solver already holds: a covariance needs no
+    second differentiation of the rollout. ``minimum_norm``: solve for the step
+    by SVD, so that a direction the data do not determine is not moved along
+    (QR's step there is arbitrary, and was measured at 1e12 × the parameters).
     """
-    solver = _DampedGaussNewton()
-
-    def params_at(z):
-        return _unflat(x.at[free].set(z), like, z.dtype)
-
-    residuals = _forward_jacobian(lambda z: _residuals(params_at(z), problem)[0])
+    solver = (
+        _DampedGaussNewton(descent=optx.NewtonDescent(linear_solver=lx.SVD()))
+        if minimum_norm
+        else _DampedGaussNewton()
+    )
+    residuals = _forward_jacobian(lambda z: residual_fn(z, data))
 
     def fn(z, _):
         return residuals(z), None
@@ -172,14 +185,14 @@ def _gauss_newton(z0, x, free, like, problem, ftol, floor, max_iter: int):
         return z, state, history, n, done, converged
 
     carry = (z0, state, history, zero, jnp.array(False), jnp.array(False))
-    z, _, history, n, _, converged = jax.lax.while_loop(cond, body, carry)
-    return z, history, n, converged
+    z, state, history, n, _, converged = jax.lax.while_loop(cond, body, carry)
+    return z, history, n, converged, state.f_info.residual, state.f_info.jac.as_matrix()
 
 
 def _optimise(
     params, problem, free, *, adam_steps, adam_learning_rate, max_iter, ftol, floor
 ) -> "_Optimised":
-    """Adam warm-up (optional, eager), then Gauss–Newton (`_gauss_newton`) over the ``free`` coordinates."""
+    """Adam warm-up (optional, eager), then Gauss–Newton (`gauss_newton`) over the ``free`` coordinates."""
     dtype = params.chol.dtype
     x = _flat(params)
     history = []
@@ -194,12 +207,10 @@ def _optimise(
                 step, state = adam_update(jnp.asarray(_flat(grad)[free]), state)
             x = x.copy()
             x[free] += np.asarray(step)
-    z, gn_history, n, converged = _gauss_newton(
+    z, gn_history, n, converged, _, _ = gauss_newton(
+        _inertia_residuals,
         jnp.asarray(x[free], dtype),
-        jnp.asarray(x, dtype),
-        jnp.asarray(free),
-        params,
-        problem,
+        (jnp.asarray(x, dtype), jnp.asarray(free), params, problem),
         jnp.asarray(ftol, dtype),
         jnp.asarray(floor, dtype),
         max_iter,

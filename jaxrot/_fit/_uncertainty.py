@@ -1,0 +1,79 @@
+"""Standard errors, covariance and identifiability from the Gauss–Newton Jacobian at the optimum.
+
+Bates & Watts (Nonlinear Regression Analysis, ch. 2–3): with whitened residuals
+``r`` and ``J = ∂r/∂φ``, ``Cov(φ̂) ≈ (JᵀJ)⁻¹``; in the user's units ``p = g(φ)`` the
+delta method gives ``Cov(p̂) ≈ G Cov(φ̂) Gᵀ`` with ``G = ∂g/∂φ`` (forward mode, exact).
+
+Identifiability: the singular values of ``J`` with its columns scaled to unit
+norm. One below ``rcond ×`` the largest is a combination of parameters the data
+do not fix; the covariance is the pseudo-inverse on the determined subspace, and
+every parameter that moves along an undetermined direction gets an infinite
+standard error and is named, never a silently huge number.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+# A parameter is named in an undetermined direction when it moves by at least this fraction of
+# the direction's largest move (each measured in units of the parameter's own scale).
+INVOLVED = 0.3
+
+
+class Uncertainty(NamedTuple):
+    covariance: np.ndarray  # (p, p) in the user's units; inf rows and columns where undetermined
+    stderr: np.ndarray  # (p,)
+    unidentified: tuple  # labels
+    cov_phi: np.ndarray  # (n, n) pseudo-inverse of JᵀJ on the determined subspace
+    null: np.ndarray  # (n, j) undetermined directions in φ
+
+
+def analyse(jac, g, scale, labels, rcond):
+    """The `Uncertainty` of the user parameters ``p`` (Jacobian ``g = ∂p/∂φ``, typical sizes ``scale``)."""
+    jac = np.asarray(jac, np.float64)
+    g = np.asarray(g, np.float64)
+    norms = np.linalg.norm(jac, axis=0)
+    d = np.where(norms > 0, 1 / np.where(norms > 0, norms, 1), 1.0)
+    _, s, vt = np.linalg.svd(jac * d, full_matrices=False)
+    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+    directions = d[:, None] * vt.T  # columns: right singular vectors in φ
+    kept = directions[:, keep]
+    cov_phi = (kept / s[keep] ** 2) @ kept.T
+    null = directions[:, ~keep]
+    covariance = g @ cov_phi @ g.T
+    stderr = np.sqrt(np.maximum(np.diag(covariance), 0))
+    involved = involved_in(g @ null, scale)
+    too_wide = stderr > scale
+    bad = involved | too_wide
+    stderr = np.where(involved, np.inf, stderr)
+    covariance = covariance.copy()
+    covariance[involved, :] = np.inf
+    covariance[:, involved] = np.inf
+    named = tuple(label for label, b in zip(labels, bad, strict=True) if b)
+    return Uncertainty(covariance, stderr, named, cov_phi, null)
+
+
+def involved_in(moves, scale):
+    """Which rows move along any column of ``moves`` (each row measured in its own ``scale``)."""
+    flags = np.zeros(moves.shape[0], bool)
+    for move in np.asarray(moves).T:
+        relative = np.abs(move) / scale
+        if relative.max() > 0:
+            flags |= relative >= INVOLVED * relative.max()
+    return flags
+
+
+def propagate(g_all, cov_phi, null, scale_all):
+    """Standard errors of any function of ``φ`` (Jacobian ``g_all``): inf where it moves undetermined."""
+    se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g_all, cov_phi, g_all), 0))
+    moves = np.abs(g_all @ null) / scale_all[:, None] if null.size else np.zeros((g_all.shape[0], 0))
+    # Compare with the largest move in the user parameters' own terms: any visible move counts.
+    return np.where(np.any(moves > 1e-6, axis=1), np.inf, se)
+
+
+def correlations(covariance):
+    """Correlation matrix of a covariance (NaN where a variance is 0 or infinite)."""
+    sd = np.sqrt(np.diag(covariance))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return covariance / np.outer(sd, sd)

@@ -1,0 +1,270 @@
+"""`jaxrot.identify`: parameters, several experiments, partial observations and their uncertainties.
+
+Data come from the package's reference solver (diffrax Dopri8 at 1e-12, `_telemetry`), or,
+for the round-off checks, from the fitted scheme itself at the fit's own step.
+Recovery is checked as |estimate − truth| < 4 standard errors for every parameter: for a
+calibrated fit each such event has probability 6e-5, so 30 parameters fail together with
+probability < 2e-3 for any seed (the seeds here are fixed, so the outcome is deterministic).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _telemetry import SATELLITE_DIPOLE, SATELLITE_INERTIA, dipole_torque, satellite_experiments
+
+import jaxrot
+from jaxrot import quaternion as quat
+
+
+Z = 4.0
+
+
+@pytest.fixture(scope="module")
+def satellite():
+    experiments, truth = satellite_experiments(0)
+    fit = jaxrot.identify(
+        experiments, torque=dipole_torque, args={"dipole": jnp.zeros(3)}, free_args={"dipole": True}
+    )
+    return experiments, truth, fit
+
+
+def test_satellite_inertia_dipole_and_states_within_their_standard_errors(satellite):
+    experiments, truth, fit = satellite
+    assert fit.converged and fit.unidentified == ()
+    assert np.all(np.abs(np.asarray(fit.inertia) - SATELLITE_INERTIA) < Z * fit.stderr.inertia)
+    assert np.all(np.abs(np.asarray(fit.args["dipole"]) - SATELLITE_DIPOLE) < Z * fit.stderr.args["dipole"])
+    assert np.all(np.abs(np.asarray(fit.omega0) - np.stack(truth["omega0"])) < Z * fit.stderr.omega0)
+    angles = quat.angle_between(fit.q0, jnp.asarray(np.stack(truth["q0"])))
+    assert np.all(np.asarray(angles) < Z * 3 * np.max(fit.stderr.q0))
+    # The standard errors are those of the data, not vacuous: 1e-4 rad, 2e-5 rad/s noise on 363 samples.
+    assert np.all(fit.stderr.inertia < 1e-3 * np.trace(SATELLITE_INERTIA))
+    # The misfit is the noise: with the true σ, the loss is χ² with m − n degrees of freedom.
+    m = sum(int(np.sum(np.isfinite(r))) for parts in fit.residuals for r in parts.values())
+    n = len(fit.names)
+    assert abs(fit.loss - (m - n)) < 5 * np.sqrt(2 * (m - n))
+    assert fit.scale_determined
+
+
+def test_covariance_labels_and_correlations(satellite):
+    _, _, fit = satellite
+    assert fit.names[:6] == (
+        "inertia[0,0]",
+        "inertia[1,1]",
+        "inertia[2,2]",
+        "inertia[0,1]",
+        "inertia[0,2]",
+        "inertia[1,2]",
+    )
+    assert fit.names[6:9] == ("args.dipole[0]", "args.dipole[1]", "args.dipole[2]")
+    assert fit.names[9] == "q0[0].rotation[0]" and fit.names[12] == "omega0[0,0]"
+    assert fit.covariance.shape == (len(fit.names),) * 2
+    np.testing.assert_allclose(np.sqrt(np.diag(fit.covariance))[:3], np.diag(fit.stderr.inertia), rtol=1e-10)
+    np.testing.assert_allclose(np.diag(fit.correlation), 1.0, rtol=1e-12)
+    assert np.all(np.abs(fit.correlation) <= 1 + 1e-12)
+
+
+def _torque_free_record(scheme, dt, dtype, n=31, every=10):
+    state = jaxrot.RotState(jnp.array([1.0, 0, 0, 0], dtype), jnp.array([0.3, 0.1, 1.0], dtype))
+    return jaxrot.rollout(
+        scheme, state, jnp.array([1.0, 1.5, 2.0], dtype), dt, (n - 1) * every, save_every=every
+    )
+
+
+def test_noise_free_fit_reaches_round_off():
+    # Data stepped by the fitted scheme at the fit's own step: the model can be exact, so the fit
+    # ends at round-off. Each of the 300 steps rounds by ~eps, so the states are known to ~3e-14
+    # rad; with moment sensitivities of order 1 rad per unit ratio, ratios come back to ~1e-12.
+    record = _torque_free_record("rkmk4", 0.02, jnp.float64)
+    fit = jaxrot.identify(jaxrot.Experiment(record.t, q=record.q, sigma_q=1e-3), dt=0.02)
+    assert fit.converged
+    moments = np.linalg.eigvalsh(np.asarray(fit.inertia))
+    np.testing.assert_allclose(moments / moments[0], [1.0, 1.5, 2.0], rtol=1e-9)
+    np.testing.assert_allclose(np.trace(np.asarray(fit.inertia)), 1.0, rtol=1e-12)  # scale not determined
+    assert not fit.scale_determined
+    assert fit.loss < 1e-12
+
+
+def test_float32_noise_free_converges_without_nan():
+    record = _torque_free_record("rkmk4", 0.02, jnp.float32)
+    fit = jaxrot.identify(jaxrot.Experiment(record.t, q=record.q), dt=0.02)
+    assert fit.inertia.dtype == jnp.float32 and fit.converged
+    moments = np.linalg.eigvalsh(np.asarray(fit.inertia, np.float64))
+    # float32: 300 steps of eps = 1.2e-7 leave ~4e-5 rad in the states, and the ratios follow.
+    np.testing.assert_allclose(moments / moments[0], [1.0, 1.5, 2.0], rtol=1e-3)
+    assert np.all(np.isfinite(fit.stderr.inertia))
+
+
+def test_unidentifiable_combination_is_named_not_hidden():
+    # Two gains that enter only through their sum: the data fix a + b, not a and b. (With the
+    # inertia free as well, only I / (a + b) would be fixed: the inertia is held here.)
+    def torque(t, q, omega, args):
+        return (args["a"] + args["b"]) * jnp.array([0.0, 0.0, 1.0]) * 0.01
+
+    truth = {"a": jnp.array(0.4), "b": jnp.array(0.6)}
+    state = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 0.1, 1.0]))
+    record = jaxrot.rollout(
+        "rkmk4", state, jnp.array([1.0, 1.5, 2.0]), 0.05, 200, torque=torque, args=truth, save_every=5
+    )
+    experiment = jaxrot.Experiment(record.t, q=record.q, sigma_q=1e-4)
+    with pytest.warns(UserWarning, match="do not determine"):
+        fit = jaxrot.identify(
+            experiment,
+            torque=torque,
+            args={"a": jnp.array(0.3), "b": jnp.array(0.5)},
+            free_args={"a": True, "b": True},
+            inertia0=jnp.diag(jnp.array([1.0, 1.5, 2.0])),
+            free_inertia=False,
+            dt=0.05,
+        )
+    assert set(fit.unidentified) == {"args.a", "args.b"}
+    assert np.isinf(fit.stderr.args["a"]) and np.isinf(fit.stderr.args["b"])
+    assert np.all(np.isfinite(fit.stderr.omega0))
+    np.testing.assert_allclose(float(fit.args["a"] + fit.args["b"]), 1.0, rtol=1e-8)
+
+
+def test_tracked_axis_heavy_top_centre_of_mass():
+    # A heavy asymmetric top seen only through one body axis: its centre-of-mass offset is fitted.
+    inertia = jnp.diag(jnp.array([1.0, 1.4, 0.7]))
+    gravity = jnp.array([0.0, 0.0, -1.0])
+
+    def torque(t, q, omega, args):
+        return jnp.cross(quat.rotate(q, args["offset"]), gravity)
+
+    offset = jnp.array([0.02, -0.01, 0.1])
+    q0 = quat.exp(jnp.array([0.3, -0.2, 0.1]))
+    omega0 = jnp.array([0.2, -0.1, 3.0])
+    t = jnp.linspace(0.0, 6.0, 121)
+    ref = jaxrot.reference_rollout(
+        jaxrot.RotState(q0, omega0), inertia, t, torque=torque, args={"offset": offset}
+    )
+    axis = jnp.array([0.0, 0.0, 1.0])
+    rng = np.random.default_rng(1)
+    sigma = 1e-3
+    seen = np.asarray(quat.rotate(ref.q, axis))
+    noisy = seen + np.cross(rng.normal(size=(121, 3)) * sigma, seen)
+    noisy /= np.linalg.norm(noisy, axis=-1, keepdims=True)
+    experiment = jaxrot.Experiment(t, direction=noisy, body_vector=axis, sigma_direction=sigma)
+    fit = jaxrot.identify(
+        experiment,
+        torque=torque,
+        args={"offset": jnp.array([0.0, 0.0, 0.05])},
+        free_args={"offset": True},
+        inertia0=inertia,
+        free_inertia=False,
+        q0=np.asarray(quat.multiply(quat.exp(jnp.array([0.02, 0.0, -0.03])), q0))[None],
+        omega0=np.asarray(omega0 + 0.05)[None],
+    )
+    assert fit.converged
+    assert np.all(np.abs(np.asarray(fit.args["offset"]) - np.asarray(offset)) < Z * fit.stderr.args["offset"])
+    assert np.all(fit.stderr.inertia == 0)
+
+
+def test_gyro_with_dropouts_irregular_times_and_positive_damping():
+    # Gyro only, a known control torque fixes the scale, a damping coefficient declared positive.
+    inertia = jnp.array([[2.0, 0.1, 0.0], [0.1, 3.0, -0.2], [0.0, -0.2, 4.0]])
+
+    def damping(t, q, omega, args):
+        return -args["c"] * omega
+
+    rng = np.random.default_rng(2)
+    t = np.sort(rng.uniform(0.0, 8.0, 90))
+    t_c = np.linspace(0.0, 8.0, 9)
+    tau_c = rng.normal(size=(9, 3))
+
+    def torque(tt, q, omega, args):
+        control = jax.vmap(lambda col: jnp.interp(tt, jnp.asarray(t_c), col), in_axes=1)(jnp.asarray(tau_c))
+        return damping(tt, q, omega, args) + control
+
+    ref = jaxrot.reference_rollout(
+        jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.5, -0.3, 0.8])),
+        inertia,
+        jnp.asarray(t),
+        torque=torque,
+        args={"c": 0.05},
+    )
+    sigma = 1e-3
+    gyro = np.asarray(quat.rotate(quat.conjugate(ref.q), ref.omega)) + rng.normal(size=(90, 3)) * sigma
+    gyro[[5, 17, 40]] = np.nan  # dropouts
+    q_obs = np.asarray(ref.q).copy()
+    q_obs[::3] = np.nan  # the star tracker sees every third sample only... and then not at all:
+    q_obs[:] = np.nan
+    q_obs[0] = np.asarray(ref.q[0])  # one orientation fix at the start
+    experiment = jaxrot.Experiment(
+        t, q=q_obs, omega_body=gyro, sigma_q=1e-4, sigma_omega=sigma, control=(t_c, tau_c)
+    )
+    fit = jaxrot.identify(
+        experiment,
+        torque=damping,
+        args={"c": jnp.array(0.2)},
+        free_args={"c": "positive"},
+        inertia0=jnp.diag(jnp.array([2.5, 2.5, 3.5])),
+    )
+    assert fit.converged and float(fit.args["c"]) > 0
+    assert abs(float(fit.args["c"]) - 0.05) < Z * float(fit.stderr.args["c"])
+    assert np.all(np.abs(np.asarray(fit.inertia) - np.asarray(inertia)) < Z * fit.stderr.inertia)
+    assert np.isnan(fit.residuals[0]["omega_body"][5]).all()
+
+
+def test_jacobian_is_finite_at_a_sphere_at_rest():
+    # Zero angular velocity and a spherical start: the Taylor branches keep every derivative finite.
+    t = np.linspace(0.0, 1.0, 5)
+    q = np.tile([1.0, 0, 0, 0], (5, 1))
+    experiment = jaxrot.Experiment(t, q=q, omega_body=np.zeros((5, 3)), sigma_q=1e-3, sigma_omega=1e-3)
+    with pytest.warns(UserWarning, match="do not determine"):  # a body at rest shows no inertia
+        fit = jaxrot.identify(experiment, inertia0=jnp.eye(3), dt=0.25, max_iter=1)
+    assert "inertia[0,0]" in fit.unidentified
+    assert np.all(np.isfinite(np.asarray(fit.inertia)))
+    assert np.all(np.isfinite(fit.loss_history))
+
+
+def _ok_experiment():
+    return jaxrot.Experiment(np.linspace(0, 1, 5), omega_body=np.ones((5, 3)))
+
+
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (
+            lambda: jaxrot.Experiment(np.linspace(0, 1, 5), q=np.tile([1.0, 0, 0, 0], (4, 1))),
+            "4 rows but `t` has 5",
+        ),
+        (lambda: jaxrot.Experiment(np.array([0.0, 2.0, 1.0]), omega_body=np.ones((3, 3))), "unsorted"),
+        (lambda: jaxrot.Experiment(np.array([0.0, 1.0, 1.0]), omega_body=np.ones((3, 3))), "duplicate"),
+        (
+            lambda: jaxrot.Experiment(np.linspace(0, 1, 3), omega_body=np.ones((3, 3)), sigma_omega=0.0),
+            "sigma_omega",
+        ),
+        (
+            lambda: jaxrot.Experiment(np.linspace(0, 1, 3), omega_body=np.ones((3, 3)), sigma_q=-1.0),
+            "sigma_q",
+        ),
+        (lambda: jaxrot.Experiment(np.linspace(0, 1, 3)), "no observation"),
+        (
+            lambda: jaxrot.Experiment(np.linspace(0, 1, 3), omega_body=np.full((3, 3), np.nan)),
+            "no observation",
+        ),
+        (lambda: jaxrot.Experiment(np.linspace(0, 1, 3), direction=np.ones((3, 3))), "body_vector"),
+        (lambda: jaxrot.Experiment(np.linspace(0, 1, 3), q=np.ones((3, 4))), "unit quaternions"),
+        (
+            lambda: jaxrot.identify(
+                _ok_experiment(),
+                torque=lambda t, q, w, a: a["k"] * w,
+                args={"k": 1.0},
+                free_args={"kk": True},
+                inertia0=jnp.eye(3),
+            ),
+            "not in `args`",
+        ),
+        (lambda: jaxrot.identify(_ok_experiment()), "inertia0"),
+        (lambda: jaxrot.identify(_ok_experiment(), inertia0=jnp.eye(3), free_inertia="axes"), "free_inertia"),
+        (lambda: jaxrot.identify([]), "experiments"),
+        (
+            lambda: jaxrot.identify(_ok_experiment(), inertia0=jnp.diag(jnp.array([1.0, 1.0, 3.0]))),
+            "triangle",
+        ),
+    ],
+)
+def test_bad_input_is_a_value_error_before_compilation(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
