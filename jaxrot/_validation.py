@@ -406,17 +406,20 @@ def check_observed(observed, normalize):
     dtype = jnp.result_type(*(x for x in (t, q, omega) if x is not None))
     if not jnp.issubdtype(dtype, jnp.floating):
         dtype = jnp.result_type(float)
-    q = q / norms[:, None]
-    # Make consecutive quaternions sign-continuous (q and -q are the same rotation).
-    dots = np.sum(q[1:] * q[:-1], axis=-1)
-    signs = np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))
-    q = q * signs[:, None]
+    q = sign_continuous(q / norms[:, None])
     return (
         t.astype(np.float64),
         q.astype(np.float64),
         None if omega is None else omega.astype(np.float64),
         dtype,
     )
+
+
+def sign_continuous(q) -> np.ndarray:
+    """Quaternions ``(n, 4)`` with signs flipped so consecutive ones are on the same side (q ≡ −q)."""
+    q = np.asarray(q, np.float64)
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    return q * np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))[:, None]
 
 
 def check_int(value, name, minimum=1):

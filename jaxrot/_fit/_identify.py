@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import quaternion as quat
 from .._state import Trajectory
-from .._validation import check_inertia_values, check_int, check_torque
+from .._validation import check_inertia_values, check_int, check_torque, sign_continuous
 from ..schemes import resolve_scheme
 from ._experiment import KINDS, Experiment
 from ._identify_model import (
@@ -190,14 +190,8 @@ def _start_omega(e, q_start):
         return np.asarray(quat.rotate(jnp.asarray(q_start), jnp.asarray(e.omega_body[rows[0]], jnp.float64)))
     rows = _finite_rows(e.q)
     if rows.size >= 3:
-        return estimate_omega(e.t[rows[:3]], _sign_continuous(e.q[rows[:3]]))[0]
+        return estimate_omega(e.t[rows[:3]], sign_continuous(e.q[rows[:3]]))[0]
     return np.zeros(3)
-
-
-def _sign_continuous(q):
-    q = np.asarray(q, np.float64)
-    dots = np.sum(q[1:] * q[:-1], axis=-1)
-    return q * np.cumprod(np.concatenate([[1.0], np.where(dots < 0, -1.0, 1.0)]))[:, None]
 
 
 def _check_starts(value, name, k, width):
@@ -388,7 +382,7 @@ def identify(
         best = max(candidates, key=lambda i: _finite_rows(experiments[i].q).size)
         e = experiments[best]
         rows = _finite_rows(e.q)
-        q_rows = _sign_continuous(e.q[rows])
+        q_rows = sign_continuous(e.q[rows])
         w_rows = _finite_rows(e.omega_body)
         if np.array_equal(w_rows, np.arange(e.t.shape[0])) and rows.size == e.t.shape[0]:
             omega_world = np.asarray(quat.rotate(jnp.asarray(q_rows), jnp.asarray(e.omega_body, jnp.float64)))
@@ -518,7 +512,7 @@ def identify(
             rows = _finite_rows(e.q)
             if rows.size >= 3:
                 speeds.append(
-                    np.linalg.norm(estimate_omega(e.t[rows], _sign_continuous(e.q[rows])), axis=-1).max()
+                    np.linalg.norm(estimate_omega(e.t[rows], sign_continuous(e.q[rows])), axis=-1).max()
                 )
         w_max = float(max(speeds))
         dt = DEFAULT_STEP_ANGLE / w_max if w_max > 0 else spacing
