@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrot
+import jaxrot._fusion
 from jaxrot import quaternion as quat
 from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot._inertia import body_inertia
@@ -337,10 +338,14 @@ def main():
     parser.add_argument("--time-cap", type=float, default=2.0, help="stop a ladder past this many s per run")
     parser.add_argument("--schemes", default=None, help="comma-separated names (default: all)")
     parser.add_argument("--out", default="docs/race")
+    parser.add_argument(
+        "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
+    )
     opts = parser.parse_args()
+    jaxrot._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[opts.barriers]
     out = Path(opts.out)
     out.mkdir(parents=True, exist_ok=True)
-    info = machine_info()
+    info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
     print(f"machine: {info}")
     report = {"machine": info, "scenes": {}}
     schemes = opts.schemes.split(",") if opts.schemes else None

@@ -32,6 +32,7 @@ import numpy as np
 from tqdm import tqdm
 
 import jaxrot
+import jaxrot._fusion
 from jaxrot import quaternion as quat
 from jaxrot.comparison import time_compiled
 from jaxrot.scenes import heavy_top
@@ -115,6 +116,7 @@ def machine():
         "jaxrot": jaxrot.__version__,
         "diffrax": diffrax.__version__,
         "device": jax.devices()[0].device_kind,
+        "stage_barriers": jaxrot._fusion._barriers(),
     }
     if have_jax_md():
         import importlib.metadata
@@ -200,7 +202,11 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-peer", action="store_true", help="skip jax_md even when installed")
     parser.add_argument("--json", default=None, help="also write the rows here")
+    parser.add_argument(
+        "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
+    )
     ns = parser.parse_args(argv)
+    jaxrot._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[ns.barriers]
     sizes = [int(float(x)) for x in ns.n.split(",")]
     dtypes = ns.dtype.split(",")
     schemes = ns.schemes.split(",")

@@ -13,6 +13,19 @@ Values, gradients and batching are unchanged: the barrier is the identity.
 import jax
 
 
+BARRIERS = None
+"""Where `stage` places its barrier: ``None`` (default) when tracing for CPU only, else always
+(``True``) or never (``False``). Private: benchmarks set it before anything is traced, in a process
+of their own; compiled programs keep what they were traced with. On an H100 (jax 0.11.2, float32,
+heavy top, 10⁶ bodies) the steps ran up to 1.33× faster without them (zhao 3.2 → 4.3 G
+particle-steps/s, rkmk4 1.9 → 2.4, srkn14a 0.135 → 0.170; no_squish and rozmanov unchanged): there
+fusion wins (docs/performance.md, "On a GPU")."""
+
+
+def _barriers() -> bool:
+    return jax.default_backend() == "cpu" if BARRIERS is None else BARRIERS
+
+
 def stage(*values):
     """The identity on a value (or several), computed once and materialised.
 
@@ -22,7 +35,7 @@ def stage(*values):
         >>> stage(jnp.arange(3.0)).tolist()
         [0.0, 1.0, 2.0]
     """
-    kept = jax.lax.optimization_barrier(values)
+    kept = jax.lax.optimization_barrier(values) if _barriers() else values
     return kept[0] if len(values) == 1 else kept
 
 

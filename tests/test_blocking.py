@@ -98,3 +98,17 @@ def test_coupled_bodies_are_not_blocked(tiny_blocks):
     assert run.n_blocks == 1
     field = jaxrot.SCENES["dipole_rotating_field"](jnp.float64)
     assert not _blocking.couples_bodies(field.torque, n, jnp.zeros(()), scene.state, field.args, None)
+
+
+def test_only_cpu_bodies_are_blocked(tiny_blocks, monkeypatch):
+    # A GPU needs every body at once: blocks ran one after another there (docs/performance.md).
+    scene = jaxrot.SCENES["heavy_top"](jnp.float64)
+    state = jaxrot.RotState(
+        jnp.broadcast_to(scene.state.q, (64, 4)), jnp.broadcast_to(scene.state.omega, (64, 3))
+    )
+    assert _blocking.on_cpu(state.q)
+    assert jax.jit(lambda q: jnp.asarray(_blocking.on_cpu(q)))(state.q)
+    args = ("zhao", state, scene.inertia, 1e-3, 3, scene.torque, scene.args, 1, 0.0, None, False, False)
+    assert _run.prepare_run(*args).n_blocks > 1
+    monkeypatch.setattr(_blocking, "on_cpu", lambda x: False)
+    assert _run.prepare_run(*args).n_blocks == 1

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import jaxrot
+import jaxrot._fusion
 from jaxrot._fusion import stage, stage_stacked
 from jaxrot.scenes import heavy_top
 
@@ -50,3 +51,14 @@ def test_stage_is_the_identity_for_values_gradients_and_batching(barrier):
     batched = jax.vmap(f)(jnp.stack([x, 2 * x]))
     np.testing.assert_allclose(batched, jnp.array([f(x), f(2 * x)]), rtol=1e-15)
     np.testing.assert_array_equal(stage(x), x)
+
+
+@pytest.mark.parametrize("setting, placed", [(None, True), (True, True), (False, False)])
+def test_barriers_are_placed_when_tracing_for_cpu_or_when_forced(setting, placed, monkeypatch):
+    # On a GPU fusion wins (docs/performance.md, "On a GPU"): `None` places them for CPU only.
+    monkeypatch.setattr(jaxrot._fusion, "BARRIERS", setting)
+    text = str(jax.make_jaxpr(lambda x: stage(jnp.sin(x)))(jnp.ones(3)))
+    assert ("optimization_barrier" in text) == placed
+    if setting is None:
+        monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+        assert "optimization_barrier" not in str(jax.make_jaxpr(lambda x: stage(jnp.sin(x)))(jnp.ones(3)))

@@ -1,8 +1,8 @@
 """mkdocs hook: the measured tables of the docs, rendered from the data files under docs/.
 
-A page writes ``{{ throughput_table }}``, ``{{ compile_table }}``, ``{{ memory_table }}`` or
-``{{ compare_table }}`` on a line of its own; the hook replaces it with a Markdown table built
-from ``docs/throughput_cpu.json``, ``docs/memory_cpu.json`` or ``docs/compare_heavy_top.csv``,
+A page writes ``{{ name }}`` of a table in `TABLES` on a line of its own; the hook replaces it
+with a Markdown table built from ``docs/throughput_cpu.json``, ``docs/memory_cpu.json``,
+``docs/compare_heavy_top.csv`` or the GPU results under ``docs/gpu_h100/``,
 so the pages show exactly what the benchmarks wrote.
 """
 
@@ -113,11 +113,63 @@ def compare_table(docs):
     return _table(header, rows)
 
 
+def _gpu_throughput_rows(docs):
+    """(dtype, N, barriers, {scheme: G particle-steps/s}) from every throughput file."""
+    out = []
+    for path in sorted((docs / "gpu_h100").glob("tp_*.json")):
+        data = json.loads(path.read_text())
+        barriers = data["machine"]["stage_barriers"]
+        for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in data["rows"]):
+            rates = {
+                r["method"]: r["particle_steps_per_s"] / 1e9
+                for r in data["rows"]
+                if (r["dtype"], r["n"]) == (dtype, n)
+            }
+            out.append((dtype, n, barriers, rates, data["machine"]))
+    return out
+
+
+def gpu_throughput_table(docs):
+    """G particle-steps/s without `stage` barriers, (×) against with them: docs/gpu_h100/tp_*.json."""
+    rows = _gpu_throughput_rows(docs)
+    schemes = list(rows[0][3])
+    lines = [
+        "| dtype | N | " + " | ".join(schemes) + " |",
+        "|" + "---|" * (len(schemes) + 2),
+    ]
+    keys = sorted({(d, n) for d, n, *_ in rows})
+    for dtype, n in keys:
+        by = {b: rates for d, m, b, rates, _ in rows if (d, m) == (dtype, n)}
+        if True in by and False in by:
+            cells = [f"{by[False][s]:.2f} ({by[False][s] / by[True][s]:.2f}×)" for s in schemes]
+            lines.append(f"| {dtype} | {n:.0e} | " + " | ".join(cells) + " |")
+    m = rows[0][4]
+    lines.append(f"\n*From `docs/gpu_h100/tp_*.json`: {m['device']}, Python {m['python']}, jax {m['jax']}.*")
+    return "\n".join(lines)
+
+
+def gpu_race_table(docs):
+    """The heavy-top race on the H100, from docs/gpu_h100/race_heavy_top_float64.json."""
+    data = json.loads((docs / "gpu_h100" / "race_heavy_top_float64.json").read_text())
+    lines = [
+        "| budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
+        "|---|---|---|---|",
+    ]
+    for row in data["scenes"]["heavy_top"]["table"]:
+        ratio = "—" if row["ratio"] is None else f"{row['ratio']:.2f}"
+        lines.append(f"| {row['budget']:.0e} | {row['jaxrot']} | {row['diffrax'] or 'none'} | {ratio} |")
+    m = data["machine"]
+    lines.append(f"\n*From `docs/gpu_h100/race_heavy_top_float64.json`: {m['device']}, jax {m['jax']}.*")
+    return "\n".join(lines)
+
+
 TABLES = {
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "memory_table": memory_table,
     "compare_table": compare_table,
+    "gpu_throughput_table": gpu_throughput_table,
+    "gpu_race_table": gpu_race_table,
 }
 
 

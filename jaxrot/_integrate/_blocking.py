@@ -3,7 +3,7 @@
 A step reads and writes every stage of every body. For N = 10⁶ in float64 those
 stages are megabytes each and live in DRAM: the Zhao step ran at 15–17 million
 particle-steps per second on 2 cores, against 40 M/s at N = 10⁴. When no torque
-couples the bodies, the order of the two loops is free: `rollout` then splits the
+couples the bodies, the order of the two loops is free: `rollout` then (on CPU, `on_cpu`) splits the
 bodies into blocks of about `BLOCK_BODIES` and runs the whole time loop on one
 block before the next (``lax.map`` over blocks), so a block's stages stay in cache:
 39 M/s at N = 10⁶ (100 blocks of 10⁴ bodies; no_squish 16 → 29 M/s). Each body
@@ -28,6 +28,19 @@ BLOCK_BODIES = 16384
 # Blocks of a multiple of this many bodies (8 float64 in an AVX-512 register): at N = 10⁶, 64 blocks of
 # 15625 ran the Zhao step at 27 M/s, 100 blocks of 10000 at 39 M/s (blocks of 5000 to 62500: 37-40).
 LANES = 8
+
+
+def on_cpu(x) -> bool:
+    """Whether ``x`` lives on (or, traced, will be computed on) CPU devices.
+
+    Blocking pays on CPU, where a block's stages fit in cache; a GPU needs every body at once to
+    fill its cores: with blocks of 16384 bodies, 10⁷ bodies ran 611 blocks one after another and
+    one throughput row on an H100 did not finish in minutes.
+    """
+    try:
+        return all(device.platform == "cpu" for device in x.devices())
+    except jax.errors.ConcretizationTypeError:
+        return jax.default_backend() == "cpu"
 
 
 def n_blocks_for(n: int, block: int | None = None, shards: int = 1) -> int:

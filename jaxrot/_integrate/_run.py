@@ -143,7 +143,7 @@ def prepare_run(
         (0, 0 if per_particle else None, args_axes, 0 if drive_per_particle else None),
     )
     n = math.prod(batch_shape)
-    n_blocks = _blocking.n_blocks_for(n, shards=particle_shards())
+    n_blocks = _blocking.n_blocks_for(n, shards=particle_shards()) if _blocking.on_cpu(flat_state.q) else 1
     if n_blocks > 1 and _blocking.couples_bodies(torque, n, t0, flat_state, args, args_axes):
         n_blocks = 1
     return Run(
