@@ -1,5 +1,7 @@
 """Synthetic telemetry for the identification tests, made by the package's reference solver (Dopri8)."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,14 +31,13 @@ def _interp(t, t_c, tau_c):
     return jax.vmap(lambda column: jnp.interp(t, t_c, column), in_axes=1)(tau_c)
 
 
-def satellite_experiments(seed, *, n=121, duration=600.0, sigma_q=1e-4, sigma_omega=2e-5, noise=True):
-    """Three manoeuvres of the satellite: star tracker + gyro, known magnetorquer torques.
+@functools.lru_cache(maxsize=4)
+def satellite_records(n=121, duration=600.0):
+    """The three manoeuvres without noise: ``(t, q, omega_body, t_c, tau_c, q0, omega0)`` each.
 
-    Returns ``(experiments, truth)``; ``truth`` holds the inertia, the dipole and each start state.
+    Every noise seed shares them (the reference solve is the slow part of a seed).
     """
-    rng = np.random.default_rng(seed)
-    truth = {"inertia": SATELLITE_INERTIA, "dipole": SATELLITE_DIPOLE, "q0": [], "omega0": []}
-    experiments = []
+    records = []
     starts = [(0.02, -0.01, 0.03), (-0.03, 0.02, 0.01), (0.01, 0.035, -0.02)]
     for i, w in enumerate(starts):
         q0 = quat.normalize(jnp.asarray(np.random.default_rng(100 + i).normal(size=4)))
@@ -57,16 +58,32 @@ def satellite_experiments(seed, *, n=121, duration=600.0, sigma_q=1e-4, sigma_om
             torque=torque,
             args={"dipole": jnp.asarray(SATELLITE_DIPOLE)},
         )
-        q = np.asarray(ref.q)
         omega_body = np.asarray(quat.rotate(quat.conjugate(ref.q), ref.omega))
+        records.append((t, np.asarray(ref.q), omega_body, t_c, tau_c, np.asarray(q0), np.asarray(omega0)))
+    return tuple(records)
+
+
+def satellite_experiments(seed, *, n=121, duration=600.0, sigma_q=1e-4, sigma_omega=2e-5, noise=True):
+    """Three manoeuvres of the satellite: star tracker + gyro, known magnetorquer torques.
+
+    Star-tracker noise is a body-frame rotation vector with ``sigma_q`` rad per axis; gyro noise
+    ``sigma_omega`` rad/s per axis. Returns ``(experiments, truth)``; ``truth`` holds the inertia,
+    the dipole and each start state.
+    """
+    rng = np.random.default_rng(seed)
+    truth = {"inertia": SATELLITE_INERTIA, "dipole": SATELLITE_DIPOLE, "q0": [], "omega0": []}
+    experiments = []
+    for t, q, omega_body, t_c, tau_c, q0, omega0 in satellite_records(n, duration):
         if noise:
-            q = np.asarray(quat.multiply(ref.q, quat.exp(jnp.asarray(rng.normal(size=(n, 3)) * sigma_q))))
+            q = np.asarray(
+                quat.multiply(jnp.asarray(q), quat.exp(jnp.asarray(rng.normal(size=(n, 3)) * sigma_q)))
+            )
             omega_body = omega_body + rng.normal(size=(n, 3)) * sigma_omega
         experiments.append(
             jaxrot.Experiment(
                 t, q=q, omega_body=omega_body, sigma_q=sigma_q, sigma_omega=sigma_omega, control=(t_c, tau_c)
             )
         )
-        truth["q0"].append(np.asarray(q0))
-        truth["omega0"].append(np.asarray(omega0))
+        truth["q0"].append(q0)
+        truth["omega0"].append(omega0)
     return experiments, truth

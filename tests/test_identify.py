@@ -1,5 +1,9 @@
 """`jaxrot.identify`: parameters, several experiments, partial observations and their uncertainties.
 
+The fits that compile a three-manoeuvre model (10-30 s each on 2 cores) are in the slow set; the
+default set keeps one fit of each kind of check (round-off, float32, an unidentifiable pair, a
+body at rest) and the input checks.
+
 Data come from the package's reference solver (diffrax Dopri8 at 1e-12, `_telemetry`), or,
 for the round-off checks, from the fitted scheme itself at the fit's own step.
 Recovery is checked as |estimate − truth| < 4 standard errors for every parameter: for a
@@ -29,6 +33,7 @@ def satellite():
     return experiments, truth, fit
 
 
+@pytest.mark.slow
 def test_satellite_inertia_dipole_and_states_within_their_standard_errors(satellite):
     experiments, truth, fit = satellite
     assert fit.converged and fit.unidentified == ()
@@ -46,6 +51,7 @@ def test_satellite_inertia_dipole_and_states_within_their_standard_errors(satell
     assert fit.scale_determined
 
 
+@pytest.mark.slow
 def test_covariance_labels_and_correlations(satellite):
     _, _, fit = satellite
     assert fit.names[:6] == (
@@ -123,6 +129,46 @@ def test_unidentifiable_combination_is_named_not_hidden():
     np.testing.assert_allclose(float(fit.args["a"] + fit.args["b"]), 1.0, rtol=1e-8)
 
 
+@pytest.mark.slow
+def test_estimated_sigmas_of_two_kinds_match_the_noise():
+    # σ not given: estimated per experiment and kind from the residuals, then the fit is repeated with
+    # them. Each estimate pools 363 residuals (121 samples × 3 axes, less 27/6 parameters' share):
+    # its relative sd is 1/√(2·363) = 3.7 %, so 20 % is over 5 sd.
+    experiments, _ = satellite_experiments(0)
+    blind = [jaxrot.Experiment(e.t, q=e.q, omega_body=e.omega_body, control=e.control) for e in experiments]
+    fit = jaxrot.identify(
+        blind, torque=dipole_torque, args={"dipole": jnp.zeros(3)}, free_args={"dipole": True}
+    )
+    assert fit.converged and fit.unidentified == ()
+    np.testing.assert_allclose(fit.sigma[:, 0], 1e-4, rtol=0.2)
+    np.testing.assert_allclose(fit.sigma[:, 1], 2e-5, rtol=0.2)
+    assert np.all(np.isnan(fit.sigma[:, 2]))
+    assert np.all(np.abs(np.asarray(fit.args["dipole"]) - SATELLITE_DIPOLE) < Z * fit.stderr.args["dipole"])
+
+
+@pytest.mark.slow
+def test_principal_moments_with_known_axes(satellite):
+    # free_inertia="moments": inertia0's axes held, its three moments fitted and reported.
+    experiments, _, _ = satellite
+    moments, axes = np.linalg.eigh(SATELLITE_INERTIA)
+    start = axes @ np.diag(moments * np.array([1.1, 0.95, 1.05])) @ axes.T  # same order of moments
+    fit = jaxrot.identify(
+        experiments,
+        torque=dipole_torque,
+        args={"dipole": jnp.zeros(3)},
+        free_args={"dipole": True},
+        inertia0=start,
+        free_inertia="moments",
+    )
+    assert fit.converged and fit.unidentified == ()
+    assert fit.names[:3] == ("moments[0]", "moments[1]", "moments[2]")
+    fitted = np.einsum("ji,jk,ki->i", axes, np.asarray(fit.inertia), axes)
+    se = np.sqrt(np.diag(fit.covariance))[:3]
+    assert np.all(np.abs(fitted - moments) < Z * se)
+    np.testing.assert_allclose(np.asarray(fit.inertia), axes @ np.diag(fitted) @ axes.T, atol=1e-12)
+
+
+@pytest.mark.slow
 def test_tracked_axis_heavy_top_centre_of_mass():
     # A heavy asymmetric top seen only through one body axis: its centre-of-mass offset is fitted.
     inertia = jnp.diag(jnp.array([1.0, 1.4, 0.7]))
@@ -160,6 +206,7 @@ def test_tracked_axis_heavy_top_centre_of_mass():
     assert np.all(fit.stderr.inertia == 0)
 
 
+@pytest.mark.slow
 def test_gyro_with_dropouts_irregular_times_and_positive_damping():
     # Gyro only, a known control torque fixes the scale, a damping coefficient declared positive.
     inertia = jnp.array([[2.0, 0.1, 0.0], [0.1, 3.0, -0.2], [0.0, -0.2, 4.0]])

@@ -75,7 +75,7 @@ def memory_maps():
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts /proc/self/maps")
 def test_clear_caches_releases_the_mappings_of_compiled_rollouts():
-    """README "Many compiles in one process": each compiled rollout holds memory mappings
+    """docs/performance.md, "Many compiles in one process": each compiled rollout holds memory mappings
     until `jax.clear_caches()` (conftest.py relies on it to stay under vm.max_map_count)."""
     state = jaxrot.RotState(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.1, 0.2, 0.3]))
     inertia = jnp.array([1.0, 2.0, 3.0])

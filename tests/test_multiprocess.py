@@ -1,6 +1,6 @@
 """A run across two processes (`jax.distributed` on 127.0.0.1, gloo) equals the single-process run.
 
-The README's multi-host recipe on one machine: two Python processes with 2 CPU devices each
+The multi-host recipe of docs/performance.md on one machine: two Python processes with 2 CPU devices each
 join one run, build the global state from their own bodies, roll out on a mesh over all 4
 devices and gather the trajectory (tests/_multiprocess_worker.py); this process computes the
 same rollout unsharded on one device.

@@ -1,4 +1,6 @@
-"""The README's Python examples run as printed (each in a fresh process, in a scratch folder)."""
+"""The README's Python example, and the longer ones it used to print that now live on the diffrax,
+scenes and performance pages of the documentation, run as printed (each in a fresh process, in a
+scratch folder)."""
 
 import os
 import pathlib
@@ -9,15 +11,20 @@ import sys
 import pytest
 
 
-README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
-BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.DOTALL)
-# The multi-host example needs a cluster (jax.distributed); every other block runs.
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+PAGES = [README] + [ROOT / "docs" / page for page in ("scenes.md", "performance.md", "diffrax.md")]
+README_BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.DOTALL)
+BLOCKS = [b for page in PAGES for b in re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.DOTALL)]
+# The multi-host example (docs/performance.md) needs a cluster (jax.distributed); every other block runs.
 RUNNABLE = [b for b in BLOCKS if "jax.distributed.initialize" not in b]
-# A block without imports continues the first ("Use") example.
+# A block without imports continues the README's first ("Use") example, which is also the first
+# rollout of docs/getting-started.md (the drive example of docs/scenes.md continues it).
 RUNNABLE = [b if "import jaxrot" in b else BLOCKS[0] + b for b in RUNNABLE]
 
 
 def test_the_readme_has_its_examples():
+    assert README_BLOCKS and "import jaxrot" in README_BLOCKS[0]
     assert len(BLOCKS) == len(RUNNABLE) + 1 >= 4
 
 

@@ -51,7 +51,7 @@ def test_says_so_when_it_does_not_converge():
         jax.grad(last_q)(TUMBLING.omega)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        jax.jit(last_q)(TUMBLING.omega)  # traced count: no warning (README)
+        jax.jit(last_q)(TUMBLING.omega)  # traced count: no warning (docs/schemes/rozmanov.md)
 
 
 def test_more_iterations_than_needed_change_nothing():

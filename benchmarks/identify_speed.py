@@ -1,0 +1,241 @@
+"""`jaxrot.identify` against the same identification written with diffrax and optimistix.
+
+The test satellite (`tests/_telemetry.py`: 3 manoeuvres of 121 star-tracker and gyro samples,
+known magnetorquer torques, unknown inertia tensor and residual dipole) is fitted twice from the
+same start (a diagonal inertia, zero dipole, each start state from its first samples):
+
+- jaxrot: `jaxrot.identify` with its defaults (rkmk4 at 0.2 rad per step), covariance included;
+- as a diffrax user would write it: the Euclidean quaternion ODE (q̇ = ½ ω ⊗ q, L̇ = τ) with
+  Tsit5 or Dopri5 at fixed steps, the finest of spacing/1, /2, /4, … not needed: the coarsest
+  whose orientation error against the reference at the true parameters is at most jaxrot's, then
+  `optimistix.least_squares` (Gauss–Newton and Levenberg–Marquardt) on the same whitened residuals,
+  the same 27 parameters (six inertia elements, dipole, per manoeuvre a rotation-vector offset of
+  q₀ and ω₀). The optimistix side gets no covariance: its time is the fit alone.
+
+Both sides are timed compiled (median of 3 runs) and with their first call (compile included);
+"same fit quality" is checked as the largest difference of the inertia and dipole between the two
+fits in units of jaxrot's standard errors, and the final losses.
+
+    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores
+"""
+
+import pathlib
+import statistics
+import sys
+import time
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+sys.path.insert(0, str(pathlib.Path(__file__).parents[1] / "tests"))
+
+import diffrax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import optimistix as optx  # noqa: E402
+from _telemetry import SATELLITE_DIPOLE, SATELLITE_INERTIA, dipole_torque, satellite_experiments  # noqa: E402
+
+import jaxrot  # noqa: E402
+from jaxrot import quaternion as quat  # noqa: E402
+from jaxrot.comparison import machine_info  # noqa: E402
+
+
+ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
+INERTIA0 = np.diag([0.04, 0.05, 0.06])
+
+
+def timed(fn, repeats=3):
+    """(first call s, median of ``repeats`` later calls s, last result)."""
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn())
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t0)
+    return first, statistics.median(times), out
+
+
+def stack(experiments):
+    """The experiments as arrays ``(k, n, ...)`` (same sample times here)."""
+    return {
+        "t": jnp.stack([jnp.asarray(e.t) for e in experiments]),
+        "q": jnp.stack([jnp.asarray(e.q) for e in experiments]),
+        "omega_body": jnp.stack([jnp.asarray(e.omega_body) for e in experiments]),
+        "t_c": jnp.stack([jnp.asarray(e.control[0]) for e in experiments]),
+        "tau_c": jnp.stack([jnp.asarray(e.control[1]) for e in experiments]),
+    }
+
+
+def diffrax_model(solver, substeps, data):
+    """Orientations and body rates at the samples, for parameters ``p`` (a user's diffrax code)."""
+    spacing = float(data["t"][0, 1] - data["t"][0, 0])
+    n_steps = (data["t"].shape[1] - 1) * substeps
+
+    def field_torque(t, y, args):
+        q, momentum = y
+        inertia, dipole, t_c, tau_c = args
+        rotation = quat.to_matrix(q / jnp.linalg.norm(q))
+        omega = rotation @ jnp.linalg.solve(inertia, rotation.T @ momentum)
+        control = jnp.stack([jnp.interp(t, t_c, tau_c[:, i]) for i in range(3)])
+        tau = dipole_torque(t, q, omega, {"dipole": dipole}) + control
+        q_dot = 0.5 * quat.multiply(jnp.concatenate([jnp.zeros(1), omega]), q)
+        return q_dot, tau
+
+    term = diffrax.ODETerm(field_torque)
+
+    def one(q0, omega0, inertia, dipole, t, t_c, tau_c):
+        rotation = quat.to_matrix(q0)
+        momentum0 = rotation @ inertia @ rotation.T @ omega0
+        sol = diffrax.diffeqsolve(
+            term,
+            solver,
+            t[0],
+            t[-1],
+            spacing / substeps,
+            (q0, momentum0),
+            args=(inertia, dipole, t_c, tau_c),
+            saveat=diffrax.SaveAt(ts=t),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=n_steps + 8,
+            adjoint=diffrax.ForwardMode(),  # Gauss–Newton differentiates forwards (jacfwd)
+        )
+        q, momentum = sol.ys
+        q = q / jnp.linalg.norm(q, axis=-1, keepdims=True)
+        rotations = jax.vmap(quat.to_matrix)(q)
+        omega_body = jnp.linalg.solve(inertia, jnp.einsum("nji,nj->ni", rotations, momentum).T).T
+        return q, omega_body
+
+    def model(p, q_start):
+        inertia = jnp.zeros((3, 3)).at[ELEMENTS].set(p["inertia"]).at[ELEMENTS[::-1]].set(p["inertia"])
+        q0 = quat.multiply(quat.exp(p["dq0"]), q_start)
+        return jax.vmap(one, in_axes=(0, 0, None, None, 0, 0, 0))(
+            q0, p["omega0"], inertia, p["dipole"], data["t"], data["t_c"], data["tau_c"]
+        )
+
+    return model
+
+
+def residuals(p, args):
+    model, data, q_start, sigma_q, sigma_omega = args
+    q, omega_body = model(p, q_start)
+    relative = quat.multiply(quat.conjugate(data["q"]), q)
+    r_q = 2 * relative[..., 1:] * jnp.sign(relative[..., :1]) / sigma_q
+    r_w = (omega_body - data["omega_body"]) / sigma_omega
+    return jnp.where(jnp.isnan(r_q), 0.0, r_q), r_w
+
+
+def main():
+    print(machine_info())
+    experiments, _ = satellite_experiments(0)
+    clean, _ = satellite_experiments(0, noise=False)
+    data, clean_data = stack(experiments), stack(clean)
+    q_start = data["q"][:, 0]
+    omega_start = quat.rotate(q_start, data["omega_body"][:, 0])
+    sigma_q, sigma_omega = experiments[0].sigma_q, experiments[0].sigma_omega
+    args = {"dipole": jnp.zeros(3)}
+
+    def jaxrot_fit():
+        return jaxrot.identify(
+            experiments, torque=dipole_torque, args=args, free_args={"dipole": True}, inertia0=INERTIA0,
+            q0=np.asarray(q_start), omega0=np.asarray(omega_start),
+        )  # fmt: skip
+
+    first, run, fit = timed(jaxrot_fit)
+    se = np.concatenate([np.asarray(fit.stderr.inertia)[ELEMENTS], np.asarray(fit.stderr.args["dipole"])])
+    ours = np.concatenate([np.asarray(fit.inertia)[ELEMENTS], np.asarray(fit.args["dipole"])])
+    truth = np.concatenate([SATELLITE_INERTIA[ELEMENTS], SATELLITE_DIPOLE])
+    true_p = {
+        "inertia": jnp.asarray(SATELLITE_INERTIA[ELEMENTS]),
+        "dipole": jnp.asarray(SATELLITE_DIPOLE),
+        "dq0": jnp.zeros((3, 3)),
+        "omega0": None,
+    }
+    # jaxrot's model error at the truth, on noise-free data: the accuracy diffrax's step must match.
+    true_q0 = clean_data["q"][:, 0]
+    true_omega0 = quat.rotate(true_q0, clean_data["omega_body"][:, 0])
+    spacing = float(data["t"][0, 1] - data["t"][0, 0])
+    substeps = round(spacing / fit.dt)
+    ours_error = 0.0
+    for k in range(len(experiments)):
+        t_c, tau_c = data["t_c"][k], data["tau_c"][k]
+
+        def torque(t, q, omega, args, t_c=t_c, tau_c=tau_c):
+            control = jnp.stack([jnp.interp(t, t_c, tau_c[:, i]) for i in range(3)])
+            return dipole_torque(t, q, omega, args) + control
+
+        traj = jaxrot.rollout(
+            fit.scheme,
+            jaxrot.RotState(true_q0[k], true_omega0[k]),
+            jnp.asarray(SATELLITE_INERTIA),
+            spacing / substeps,
+            (data["t"].shape[1] - 1) * substeps,
+            torque=torque,
+            args={"dipole": jnp.asarray(SATELLITE_DIPOLE)},
+            save_every=substeps,
+        )
+        ours_error = max(ours_error, float(jnp.max(quat.angle_between(traj.q, clean_data["q"][k]))))
+    print(f"jaxrot identify: first call {first:.1f} s, compiled {run:.2f} s, loss {fit.loss:.1f}, "
+          f"{fit.n_iterations} iterations; model error at the truth {ours_error:.1e} rad")  # fmt: skip
+    print(f"jaxrot estimate − truth, in standard errors: max {np.max(np.abs(ours - truth) / se):.2f}")
+
+    rows = [("jaxrot.identify (rkmk4, covariance included)", first, run, fit.loss, 0.0, ours_error)]
+    start = {
+        "inertia": jnp.asarray(INERTIA0[ELEMENTS]),
+        "dipole": jnp.zeros(3),
+        "dq0": jnp.zeros((3, 3)),
+        "omega0": omega_start,
+    }
+    for solver_name, solver in (("Tsit5", diffrax.Tsit5()), ("Dopri5", diffrax.Dopri5())):
+        for substeps in (1, 2, 4, 8, 16, 32):
+            model = diffrax_model(solver, substeps, data)
+            q_true, _ = jax.jit(model)(true_p | {"omega0": true_omega0}, true_q0)
+            error = float(jnp.max(quat.angle_between(q_true, clean_data["q"])))
+            if error <= ours_error:
+                break
+        step = float(data["t"][0, 1] - data["t"][0, 0]) / substeps
+        # Each optimiser at a ladder of tolerances: the loosest that reaches jaxrot's fit is its time.
+        for opt_name, optimiser in [
+            (f"{kind.__name__} tol {tol:g}", kind(rtol=tol, atol=tol))
+            for kind in (optx.GaussNewton, optx.LevenbergMarquardt)
+            for tol in (1e-4, 1e-6, 1e-10)
+        ]:
+
+            def solve(p0, optimiser=optimiser, model=model):
+                sol = optx.least_squares(
+                    residuals,
+                    optimiser,
+                    p0,
+                    args=(model, data, q_start, sigma_q, sigma_omega),
+                    max_steps=100,
+                    throw=False,
+                )
+                return sol.value, sol.stats["num_steps"]
+
+            solve = jax.jit(solve)
+            first_d, run_d, (value, n_opt) = timed(lambda solve=solve: solve(start))
+            r_q, r_w = residuals(value, (model, data, q_start, sigma_q, sigma_omega))
+            loss = float(jnp.sum(r_q**2) + jnp.sum(r_w**2))
+            theirs = np.concatenate([np.asarray(value["inertia"]), np.asarray(value["dipole"])])
+            gap = float(np.max(np.abs(theirs - ours) / se))
+            label = f"diffrax {solver_name} dt = {step:g} s + optimistix {opt_name} ({int(n_opt)} steps)"
+            rows.append((label, first_d, run_d, loss, gap, error))
+    print()
+    print(
+        "| fit | first call [s] | compiled [s] | loss | max Δ vs jaxrot [se] | model error [rad] | × jaxrot |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for label, first_r, run_r, loss, gap, error in rows:
+        cells = [label, f"{first_r:.1f}", f"{run_r:.2f}", f"{loss:.1f}", f"{gap:.2f}", f"{error:.1e}"]
+        print("| " + " | ".join(cells + [f"{run_r / run:.1f}"]) + " |")
+    same = [r for r in rows[1:] if r[4] < 0.1]
+    best = min(same, key=lambda r: r[2])
+    print(f"\nFastest diffrax + optimistix fit within 0.1 se of jaxrot's: {best[0]}")
+    print(f"  compiled {best[2]:.2f} s against jaxrot's {run:.2f} s: jaxrot {best[2] / run:.1f}× faster")
+    print(f"  first call {best[1]:.1f} s against jaxrot's {first:.1f} s: {best[1] / first:.2f}×")
+
+
+if __name__ == "__main__":
+    main()
