@@ -92,7 +92,7 @@ def inertia_of(phi_inertia, layout):
         s = coords**2
         moments = jnp.stack([s[1] + s[2], s[0] + s[2], s[0] + s[1]])
         axes = layout.inertia0.astype(coords.dtype)
-        inertia = (axes * moments) @ axes.T
+        inertia = (axes * moments[None, :]) @ axes.T
         if layout.unit_scale:
             inertia = inertia / jnp.trace(inertia)
     return inertia * layout.trace0 if layout.unit_scale else inertia
