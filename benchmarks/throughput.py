@@ -18,8 +18,6 @@ numbers drift from machine to machine.
 
 import argparse
 import json
-import os
-import platform
 import sys
 
 import jax
@@ -34,7 +32,7 @@ from tqdm import tqdm
 import jaxrot
 import jaxrot._fusion
 from jaxrot import quaternion as quat
-from jaxrot.comparison import time_compiled
+from jaxrot.comparison import machine_info, time_compiled
 from jaxrot.scenes import heavy_top
 
 
@@ -105,19 +103,7 @@ def have_jax_md():
 
 
 def machine():
-    import diffrax
-
-    info = {
-        "machine": platform.machine(),
-        "processor": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-        "jaxrot": jaxrot.__version__,
-        "diffrax": diffrax.__version__,
-        "device": jax.devices()[0].device_kind,
-        "stage_barriers": jaxrot._fusion._barriers(),
-    }
+    info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
     if have_jax_md():
         import importlib.metadata
 

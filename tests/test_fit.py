@@ -270,6 +270,7 @@ def test_a_perfect_fit_converges_in_either_precision(dtype):
     assert np.all(np.abs(fitted_ratios(fit) - true_ratios()) <= bound), (fitted_ratios(fit), bound)
 
 
+@pytest.mark.slow  # 22-28 s; identify's calibration (slow) checks the intervals over 120 seeds
 def test_a_noisy_fit_converges_within_its_standard_errors():
     obs, _ = observations(False)
     fit = torque_free_fit()

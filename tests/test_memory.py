@@ -27,7 +27,8 @@ def compiled_memory(scheme, n_bodies, n_steps, save_every):
 
 @pytest.mark.parametrize(
     ("scheme", "blocked"),
-    [pytest.param(p.values[0], False, marks=p.marks) for p in contract_params()] + [("zhao", True)],
+    [pytest.param(p.values[0], False, marks=p.marks) for p in contract_params()]
+    + [pytest.param("zhao", True, marks=pytest.mark.slow)],  # the blocked variant: 5-7 s of compiles
 )
 def test_memory_is_independent_of_the_number_of_steps(scheme, blocked, monkeypatch):
     if blocked:

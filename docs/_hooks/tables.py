@@ -163,9 +163,29 @@ def gpu_race_table(docs):
     return "\n".join(lines)
 
 
+def gradient_compile_table(docs):
+    """`benchmarks/compile.py`'s table of ``docs/compile_cpu.json`` (that script loaded by its path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "_compile_benchmark", docs.parent / "benchmarks" / "compile.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    data = json.loads((docs / "compile_cpu.json").read_text())
+    m = data["machine"]
+    note = (
+        f"\n\n*From `docs/compile_cpu.json` ({data['problem']}): {m['cpus']} CPU cores, "
+        f"Python {m['python']}, "
+        f"jax {m['jax']}, diffrax {m['diffrax']}, commit {m['commit']}, {m['date']}.*"
+    )
+    return module.table(data["rows"]) + note
+
+
 TABLES = {
     "throughput_table": throughput_table,
     "compile_table": compile_table,
+    "gradient_compile_table": gradient_compile_table,
     "memory_table": memory_table,
     "compare_table": compare_table,
     "gpu_throughput_table": gpu_throughput_table,
