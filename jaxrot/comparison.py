@@ -349,14 +349,17 @@ RESULTS_SCHEMA = 2
 
 
 def _git_commit():
-    """The checkout's commit (``+dirty`` when files differ from it), or None outside a git checkout."""
+    """The checkout's commit (``+dirty`` when the package or the benchmarks differ from it), or None
+    outside a git checkout. Docs edited during a run do not mark it."""
     root = Path(__file__).resolve().parents[1]
     try:
         run = lambda *a: subprocess.run(["git", *a], cwd=root, capture_output=True, text=True, timeout=10)  # noqa: E731
         head = run("rev-parse", "--short=12", "HEAD")
         if head.returncode != 0:
             return None
-        dirty = run("status", "--porcelain", "--untracked-files=no").stdout.strip()
+        dirty = run(
+            "status", "--porcelain", "--untracked-files=no", "--", "jaxrot", "benchmarks"
+        ).stdout.strip()
         return head.stdout.strip() + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return None

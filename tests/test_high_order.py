@@ -289,10 +289,11 @@ def test_cayley_chart_dense_output_stays_on_the_solution():
         assert float(jnp.max(quat.angle_between(sol.ys.q, ref.q))) < 1e-8
 
 
-@pytest.mark.parametrize("name", ["rkmk4", "rkmk_dopri5"])
+@pytest.mark.parametrize("name", ["rkmk4", pytest.param("rkmk_dopri5", marks=pytest.mark.slow)])
 def test_looped_stages_are_the_unrolled_stages(name):
     """``loop_stages=True`` does the same arithmetic but for the order of each stage's sum (zero
-    terms included): 20 steps of ~100 operations at float64's 1.1e-16 stay far inside 1e-12."""
+    terms included): 20 steps of ~100 operations at float64's 1.1e-16 stay far inside 1e-12.
+    (12 s per scheme: three programs compile; the adaptive pair in the slow set.)"""
     looped = type(jaxrot.SCHEMES[name])(loop_stages=True)
     state = principal_state()
 
