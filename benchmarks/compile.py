@@ -49,15 +49,11 @@ def _programs(method):
     ts = dt * SAVE_EVERY * jnp.arange(STEPS // SAVE_EVERY + 1, dtype=jnp.float64)
 
     if method in DIFFRAX:
-        solver = {
-            "diffrax_tsit5": diffrax.Tsit5,
-            "diffrax_dopri5": diffrax.Dopri5,
-            "diffrax_dopri8": diffrax.Dopri8,
-        }
+        solver = getattr(diffrax, method.removeprefix("diffrax_").capitalize())  # diffrax_tsit5 -> Tsit5
 
         def saved_q(inertia, args):
             sol = diffrax.diffeqsolve(
-                jaxrot.RigidBodyTerm(inertia, scene.torque), solver[method](), 0.0, STEPS * dt, dt,
+                jaxrot.RigidBodyTerm(inertia, scene.torque), solver(), 0.0, STEPS * dt, dt,
                 scene.state, args=args, saveat=diffrax.SaveAt(ts=ts), max_steps=STEPS,
             )  # fmt: skip
             return sol.ys.q

@@ -129,6 +129,11 @@ def _combination(dt, weights, vectors):
     return dt * total
 
 
+def _no_barrier(*values):
+    """`stage`'s signature without its barrier (inside a loop, whose body is one already)."""
+    return values[0] if len(values) == 1 else values
+
+
 def _last_needed_stage(tableau: diffrax.ButcherTableau, with_error: bool) -> int:
     """Number of leading stages that the solution (and error estimate) reads."""
     weights = np.abs(tableau.b_sol) + (np.abs(tableau.b_error) if with_error else 0)
@@ -251,7 +256,6 @@ class AbstractLieRungeKutta(AbstractScheme):
         inertia = body_inertia(inertia)
         (q0, omega0), momentum0 = carry
         c = np.concatenate([[0.0], self.tableau.c])
-        chart, inverse_differential = CHARTS[self.chart]
         ks, taus = [omega0], []
         if torque is not None:
             if first_torque is None:
@@ -264,13 +268,23 @@ class AbstractLieRungeKutta(AbstractScheme):
                 theta = jnp.zeros_like(omega0)
             impulse = None if torque is None else _combination(dt, a_row, taus)
             momentum = momentum0 if impulse is None else momentum0 + impulse
-            rotation, c_theta = stage(*chart(theta))
-            q_i = stage(multiply(rotation, q0))
-            omega_i = stage(_omega(q_i, momentum, inertia))
-            ks.append(stage(inverse_differential(theta, c_theta, omega_i)))
+            k_i, tau_i = self._slopes(theta, momentum, q0, t + float(c[i]) * dt, inertia, torque, args, stage)
+            ks.append(k_i)
             if torque is not None:
-                taus.append(stage(world_torque(torque, t + float(c[i]) * dt, q_i, omega_i, args)))
+                taus.append(tau_i)
         return ks, taus
+
+    def _slopes(self, theta, momentum, q0, t_i, inertia, torque, args, barrier):
+        """One stage's ``(K_i, T_i)`` (``T_i`` None when torque-free) at ``Θ_i`` and ``L_i``.
+
+        ``barrier`` is `stage` in the unrolled stages and `_no_barrier` inside the stage loop."""
+        chart, inverse_differential = CHARTS[self.chart]
+        rotation, c_theta = barrier(*chart(theta))
+        q_i = barrier(multiply(rotation, q0))
+        omega_i = barrier(_omega(q_i, momentum, inertia))
+        k_i = barrier(inverse_differential(theta, c_theta, omega_i))
+        tau_i = None if torque is None else barrier(world_torque(torque, t_i, q_i, omega_i, args))
+        return k_i, tau_i
 
     def _looped_stages(self, carry, t, dt, inertia, torque, args, n_stages, first_torque):
         """`stages` as one loop over the tableau's rows, as diffrax evaluates its stages.
@@ -286,7 +300,6 @@ class AbstractLieRungeKutta(AbstractScheme):
             a[i, : len(row)] = row
         a = jnp.asarray(a, dtype)
         c = jnp.asarray(np.concatenate([[0.0], self.tableau.c])[:n_stages], dtype)
-        chart, inverse_differential = CHARTS[self.chart]
         ks = jnp.zeros((n_stages, *omega0.shape), dtype).at[0].set(omega0)
         taus = None
         if torque is not None:
@@ -296,16 +309,13 @@ class AbstractLieRungeKutta(AbstractScheme):
 
         def one_stage(i, slopes):
             ks, taus = slopes
-            theta = dt * jnp.sum(
-                a[i][:, None] * ks, axis=0
-            )  # not a dot: XLA:CPU runs small batched dots slowly
+            # Weighted sums as products and a sum, not a dot: XLA:CPU runs small batched dots slowly.
+            theta = dt * jnp.sum(a[i][:, None] * ks, axis=0)
             momentum = momentum0 if taus is None else momentum0 + dt * jnp.sum(a[i][:, None] * taus, axis=0)
-            rotation, c_theta = chart(theta)
-            q_i = multiply(rotation, q0)
-            omega_i = _omega(q_i, momentum, inertia)
-            ks = ks.at[i].set(inverse_differential(theta, c_theta, omega_i))
+            k_i, tau_i = self._slopes(theta, momentum, q0, t + c[i] * dt, inertia, torque, args, _no_barrier)
+            ks = ks.at[i].set(k_i)
             if taus is not None:
-                taus = taus.at[i].set(world_torque(torque, t + c[i] * dt, q_i, omega_i, args))
+                taus = taus.at[i].set(tau_i)
             return ks, taus
 
         ks, taus = jax.lax.fori_loop(1, n_stages, one_stage, (ks, taus))
