@@ -182,8 +182,8 @@ class AbstractLieRungeKutta(AbstractScheme):
     ``loop_stages`` (static, default False): evaluate the stages in one loop over the
     tableau's rows, as diffrax does, instead of unrolled. A trade of run time for compile
     time, measured on 2 CPU cores (jax 0.10.2, `benchmarks/compile.py`, heavy top, 200
-    steps): the gradient of ``RKMKDopri8`` compiles in 10 s instead of 87 s (``RKMK4``: 9 s
-    instead of 14), but every step runs 4–9× slower (N = 1 and 1000 bodies): XLA:CPU does
+    steps): the gradient of ``RKMKDopri8`` compiles in 8 s instead of 70 s (``RKMK4``: 7 s
+    instead of 11), but every step runs 4–9× slower (N = 1 and 1000 bodies): XLA:CPU does
     not fuse across the loop's iterations. Worth it for a short fit through
     ``rkmk_dopri8`` that compiles once; not for a long run. Example:
     ``RKMKDopri8(loop_stages=True)``.
