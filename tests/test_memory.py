@@ -11,18 +11,28 @@ import jaxrot
 from jaxrot._integrate import _blocking, _run
 
 
-def compiled_memory(scheme, n_bodies, n_steps, save_every):
-    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n_bodies).reshape(n_bodies, 3))
-    state = jaxrot.RotState(q, jnp.ones((n_bodies, 3)))
+def bodies(n):
+    """``n`` bodies at distinct orientations, all spinning at (1, 1, 1)."""
+    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
+    return jaxrot.RotState(q, jnp.ones((n, 3)))
 
+
+def compiled_memory(scheme, n_bodies, n_steps, save_every, gradient=False):
+    """XLA's memory accounting of a heavy-top rollout of ``n_bodies``, or with ``gradient`` of
+    ``jax.grad`` of its last saved orientations with respect to the inertia."""
+    state = bodies(n_bodies)
     top = jaxrot.SCENES["heavy_top"]()
 
-    def run(state):
+    def run(state, inertia):
         return jaxrot.rollout(
-            scheme, state, top.inertia, 1e-3, n_steps, torque=top.torque, args=top.args, save_every=save_every
+            scheme, state, inertia, 1e-3, n_steps, torque=top.torque, args=top.args, save_every=save_every
         )
 
-    return jax.jit(run).lower(state).compile().memory_analysis()
+    if gradient:
+        program, example = jax.grad(lambda inertia: jnp.sum(run(state, inertia).q[-1])), top.inertia
+    else:
+        program, example = lambda state: run(state, top.inertia), state
+    return jax.jit(program).lower(example).compile().memory_analysis()
 
 
 @pytest.mark.parametrize(
@@ -49,8 +59,7 @@ def test_the_compiled_core_keeps_the_final_carry_only_when_asked(scheme, runtime
     """`rollout` without ``return_carry`` gets the saved states and the scheme's summary of the
     final carry (rozmanov: its count of unconverged steps), not the carry itself."""
     n = 64
-    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
-    state = jaxrot.RotState(q, jnp.ones((n, 3)))
+    state = bodies(n)
     run = _run.prepare_run(
         scheme, state, jnp.array([1.0, 2.0, 3.0]), 1e-3, 20, None, None, 10, 0.0, None, True, runtime_check
     )
@@ -97,23 +106,15 @@ def test_a_gradient_keeps_each_steps_carry_not_its_stages(scheme):
     adds at least a (3,) vector of each of several stages (before the checkpoint: 17-28x the carry,
     measured). The bound, twice the carry, leaves room for XLA's layout, not for a stage."""
     n = 8
-    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
-    state = jaxrot.RotState(q, jnp.ones((n, 3)))
+    tape = {
+        n_steps: compiled_memory(scheme, n, n_steps, n_steps, gradient=True).temp_size_in_bytes
+        for n_steps in (100, 200)
+    }
     top = jaxrot.SCENES["heavy_top"]()
-
-    def temp_bytes(n_steps):
-        def loss(inertia):
-            traj = jaxrot.rollout(
-                scheme, state, inertia, 1e-3, n_steps, torque=top.torque, args=top.args, save_every=n_steps
-            )
-            return jnp.sum(traj.q[-1])
-
-        return jax.jit(jax.grad(loss)).lower(top.inertia).compile().memory_analysis().temp_size_in_bytes
-
     carry = jax.eval_shape(
         lambda s: jaxrot.SCHEMES[scheme].init(s, 0.0, top.inertia, top.torque, top.args),
-        jaxrot.RotState(q[0], jnp.ones(3)),
+        jax.tree_util.tree_map(lambda x: x[0], bodies(1)),  # one body
     )
     carry_bytes = sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(carry))
-    per_step_and_body = (temp_bytes(200) - temp_bytes(100)) / (100 * n)
+    per_step_and_body = (tape[200] - tape[100]) / (100 * n)
     assert 0 < per_step_and_body <= 2 * carry_bytes  # > 0: the tape grows with the steps (a reverse pass)
