@@ -11,9 +11,11 @@ Every cell is measured in a fresh Python process (JAX's in-memory caches of trac
 functions start empty, as they do for a user's first call; the persistent cache is off):
 ``trace_s`` is tracing and lowering to StableHLO (``jit(f).lower``), ``compile_s`` XLA's
 compilation of it (``.compile()``), and ``hlo_ops`` the number of instructions in the optimised
-HLO (what XLA had to compile). The table prints the total against diffrax's fastest-compiling
-solver of the same kind (forward or gradient), measured in the same run. ``name+loop`` rows are
-the Lie-group Runge–Kutta schemes with ``loop_stages=True``.
+HLO (what XLA had to compile), ``run_ms`` the median of 7 runs of the compiled program once it
+is compiled (one body: the fitting user's case). The table prints the totals against diffrax's
+fastest-compiling solver of the same kind (forward or gradient), and the gradient's run time
+against diffrax's fastest-running one, measured in the same run. ``name+loop`` rows are the
+Lie-group Runge–Kutta schemes with ``loop_stages=True``.
 
     python benchmarks/compile.py                       # every scheme, writes docs/compile_cpu.json
     python benchmarks/compile.py --methods zhao,rkmk_dopri8,diffrax_dopri8 --out /tmp/c.json
@@ -31,6 +33,7 @@ from pathlib import Path
 STEPS, SAVE_EVERY = 200, 10
 DIFFRAX = ("diffrax_tsit5", "diffrax_dopri5", "diffrax_dopri8")
 KINDS = ("forward", "gradient")
+RUNS = 7  # timed runs of each compiled program after the first; the median is reported
 # The Lie-group Runge–Kutta schemes again with ``loop_stages=True`` (their stages in one loop).
 LOOPED = ("rkmk4+loop", "rkmk_dopri5+loop", "rkmk_dopri8+loop")
 
@@ -88,6 +91,11 @@ def measure_one(method, kind):
     compiled = lowered.compile()
     done = time.perf_counter()
     jax.block_until_ready(compiled(*example))  # the program runs: nothing was compiled lazily
+    runs = []
+    for _ in range(RUNS):
+        start_run = time.perf_counter()
+        jax.block_until_ready(compiled(*example))
+        runs.append(time.perf_counter() - start_run)
     hlo = compiled.as_text() or ""
     ops = sum(1 for line in hlo.splitlines() if " = " in line and not line.lstrip().startswith("//"))
     return {
@@ -97,6 +105,7 @@ def measure_one(method, kind):
         "compile_s": done - traced,
         "total_s": done - start,
         "hlo_ops": ops,
+        "run_ms": 1e3 * sorted(runs)[len(runs) // 2],
     }
 
 
@@ -107,10 +116,14 @@ def table(rows):
         for k in KINDS
     }
     cells = {(r["method"], r["kind"]): r for r in rows}
+    run_best = min(
+        (r["run_ms"] for r in rows if r["kind"] == "gradient" and r["method"] in DIFFRAX and "run_ms" in r),
+        default=None,
+    )
     lines = [
         "| method | forward [s] | ÷ diffrax best | gradient [s] (trace + compile) | ÷ diffrax best "
-        "| gradient HLO ops |",
-        "|---|---|---|---|---|---|",
+        "| gradient HLO ops | gradient run [ms] | ÷ diffrax best |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for method in dict.fromkeys(r["method"] for r in rows):
         out = [f"`{method}`"]
@@ -127,6 +140,10 @@ def table(rows):
             out += [total, f"{r['total_s'] / best[kind]:.1f}×" if best[kind] else "–"]
         g = cells.get((method, "gradient"))
         out.append(str(g["hlo_ops"]) if g else "–")
+        if g and "run_ms" in g:
+            out += [f"{g['run_ms']:.2f}", f"{g['run_ms'] / run_best:.1f}×" if run_best else "–"]
+        else:
+            out += ["–", "–"]
         lines.append("| " + " | ".join(out) + " |")
     return "\n".join(lines)
 
