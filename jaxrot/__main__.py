@@ -89,8 +89,9 @@ def main(argv=None) -> int:
         "reference diffrax Dopri8 rtol=atol=1e-13 in float64"
     )
     print(", ".join(f"{k} {v}" for k, v in info.items()))
+    written = write_outputs(rows, ns.out, plot=not ns.no_plot)  # first: a long run is never lost
     print(format_table(rows))
-    for path in write_outputs(rows, ns.out, plot=not ns.no_plot):
+    for path in written:
         print(f"wrote {path}")
     print(f"total {time.perf_counter() - start:.1f} s")
     return 0

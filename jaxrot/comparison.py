@@ -207,7 +207,7 @@ def compare(
     jobs = [("fixed", name, k) for name in schemes for k in range(levels)]
     jobs += [("adaptive", name, tol) for name in solvers for tol in tolerances]
     rows = []
-    finished = set()  # schemes whose ladder reached LADDER_FLOOR or that refuse the scene's torque
+    finished = set()  # schemes whose ladder reached its floor or that refuse the scene's torque
     for kind, name, level in tqdm(jobs, desc="compare", disable=not progress, leave=False):
         if name in finished:
             continue
@@ -266,20 +266,35 @@ def compare(
                 "compile_s": compile_s,
             }
         )
-        if kind == "fixed" and rows[-1]["max_orientation_error_rad"] < LADDER_FLOOR:
+        ladder = [r["max_orientation_error_rad"] for r in rows if r["method"] == name]
+        if kind == "fixed" and (ladder[-1] < LADDER_FLOOR or stalled(ladder)):
             finished.add(name)
     return rows
 
 
-def measured_orders(rows) -> dict:
-    """Per fixed-step scheme, the fitted order over the rungs with error below `ASYMPTOTIC_ERROR`.
+def stalled(errors) -> bool:
+    """Whether a ladder (errors in order of halving dt) has reached its floor: the last halving of dt
+    gained less than a factor 2 below `ASYMPTOTIC_ERROR` (the reference's own error, or round-off)."""
+    return len(errors) >= 2 and errors[-1] < ASYMPTOTIC_ERROR and errors[-1] > errors[-2] / 2
 
+
+def measured_orders(rows) -> dict:
+    """Per fixed-step scheme, the fitted order over its rungs between the floor and `ASYMPTOTIC_ERROR`.
+
+    Above `ASYMPTOTIC_ERROR` the error saturates; where a ladder has `stalled`, rungs within a
+    decade of its smallest error carry the floor's error, not the scheme's, and are left out too.
     None when fewer than three rungs qualify.
     """
     orders = {}
     fixed = [r for r in rows if r.get("kind", "fixed") == "fixed"]
     for name in dict.fromkeys(r["method"] for r in fixed):
-        mine = [r for r in fixed if r["method"] == name and r["max_orientation_error_rad"] < ASYMPTOTIC_ERROR]
+        ladder = sorted(
+            (r for r in fixed if r["method"] == name and math.isfinite(r["max_orientation_error_rad"])),
+            key=lambda r: -r["dt"],
+        )
+        errors = [r["max_orientation_error_rad"] for r in ladder]
+        floor = 10 * min(errors) if stalled(errors) else 0.0
+        mine = [r for r, e in zip(ladder, errors, strict=True) if floor < e < ASYMPTOTIC_ERROR]
         errors = [r["max_orientation_error_rad"] for r in mine]
         orders[name] = fit_order([r["dt"] for r in mine], errors) if len(mine) >= 3 else None
     return orders
@@ -294,15 +309,17 @@ def recommend(rows, budgets=None):
     """For each error budget (rad), the row that meets it at the least wall time per particle.
 
     Default budgets: every decade from 1e-1 down to the smallest error on the
-    table. Returns a list of ``(budget, row or None)``.
+    table. Rows whose error is not finite (a step past a scheme's stability limit) meet no
+    budget. Returns a list of ``(budget, row or None)``.
     """
+    finite = [r for r in rows if math.isfinite(r["max_orientation_error_rad"])]
     if budgets is None:
-        smallest = min(r["max_orientation_error_rad"] for r in rows)
+        smallest = min((r["max_orientation_error_rad"] for r in finite), default=1.0)
         lowest = math.floor(math.log10(max(smallest, 1e-16)))
         budgets = [10.0**e for e in range(-1, lowest - 1, -1)] if lowest <= -1 else [1e-1]
     picks = []
     for budget in budgets:
-        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        ok = [r for r in finite if r["max_orientation_error_rad"] <= budget]
         picks.append((budget, min(ok, key=lambda r: r["us_per_particle_run"]) if ok else None))
     return picks
 
@@ -337,7 +354,11 @@ def format_table(rows) -> str:
             f"{r['us_per_particle_step']:>9.4f} {r['us_per_particle_run']:>9.3g} {r['compile_s']:>9.2f}"
         )
     for name, order in measured_orders(rows).items():
-        fitted = f"n/a: fewer than 3 rungs below {ASYMPTOTIC_ERROR} rad" if order is None else f"{order:.3f}"
+        fitted = (
+            f"n/a: fewer than 3 rungs between {ASYMPTOTIC_ERROR} rad and the floor"
+            if order is None
+            else f"{order:.3f}"
+        )
         lines.append(f"measured order ({name}): {fitted} (nominal {SCHEMES[name].order})")
     lines.append(format_recommendation(rows))
     return "\n".join(lines)

@@ -22,6 +22,7 @@ from jaxrot.comparison import (
     format_recommendation,
     measured_orders,
     recommend,
+    stalled,
 )
 from jaxrot.schemes.euler import Euler
 
@@ -224,6 +225,20 @@ def test_recommendation_is_the_fastest_row_within_each_budget():
     assert "≤1e-04: none" in format_recommendation(rows)
 
 
+def test_a_row_that_blew_up_meets_no_budget():
+    """A step past a scheme's stability limit gives a NaN error: no budget, no crash (it once did)."""
+    rows = [
+        {"method": "a", "kind": "fixed", "dt": 0.2, "max_orientation_error_rad": float("nan"),
+         "us_per_particle_run": 0.5},
+        {"method": "a", "kind": "fixed", "dt": 0.1, "max_orientation_error_rad": 5e-3,
+         "us_per_particle_run": 1.0},
+    ]  # fmt: skip
+    picks = recommend(rows)
+    assert [budget for budget, _ in picks] == [1e-1, 1e-2, 1e-3]
+    assert [row and row["dt"] for _, row in picks] == [0.1, 0.1, None]
+    assert "≤1e-03: none" in format_recommendation(rows)
+
+
 def test_compare_rejects_bad_arguments():
     with pytest.raises(ValueError, match="dtype"):
         compare(dtype="float16", progress=False)
@@ -238,6 +253,19 @@ def test_measured_orders_skip_saturated_rungs():
     ]
     assert measured_orders(rows)["zhao"] == pytest.approx(2.0, abs=1e-12)
     assert measured_orders(rows[:3])["zhao"] is None
+
+
+def test_measured_orders_leave_out_the_floor():
+    """An order-8 ladder that reaches the reference's floor (~1e-11 rad, the heavy top's numbers):
+    the floor rungs would pull the fitted slope to ~2.7; left out, the slope is the scheme's."""
+    errors = [2.7e-5, 7.8e-8, 2.3e-10, 9.2e-12, 9.4e-12, 9.4e-12]
+    rows = [
+        {"method": "rkmk_dopri8", "kind": "fixed", "dt": 0.2 / 2**k, "max_orientation_error_rad": e}
+        for k, e in enumerate(errors)
+    ]
+    assert stalled(errors) and not stalled(errors[:4])
+    assert measured_orders(rows)["rkmk_dopri8"] == pytest.approx(8.4, abs=0.05)
+    assert measured_orders(rows[:2])["rkmk_dopri8"] is None
 
 
 def test_fit_order_recovers_a_known_slope():

@@ -182,10 +182,10 @@ class AbstractLieRungeKutta(AbstractScheme):
     ``loop_stages`` (static, default False): evaluate the stages in one loop over the
     tableau's rows, as diffrax does, instead of unrolled. A trade of run time for compile
     time, measured on 2 CPU cores (jax 0.10.2, `benchmarks/compile.py`, heavy top, 200
-    steps): the gradient of ``RKMKDopri8`` compiles in 8 s instead of 70 s (``RKMK4``: 7 s
-    instead of 11), but every step runs 4–9× slower (N = 1 and 1000 bodies): XLA:CPU does
-    not fuse across the loop's iterations. Worth it for a short fit through
-    ``rkmk_dopri8`` that compiles once; not for a long run. Example:
+    steps): the gradient of ``RKMKDopri8`` compiles in 8.5 s instead of 68 s (``RKMK4``: 7 s
+    instead of 8) and, for one body, even runs faster (75 ms instead of 143), but a forward
+    step runs 4–9× slower (N = 1 and 1000 bodies): XLA:CPU does not fuse across the loop's
+    iterations. Worth it for a fit through ``rkmk_dopri8``; not for a long run. Example:
     ``RKMKDopri8(loop_stages=True)``.
     """
 
