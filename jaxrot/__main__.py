@@ -29,9 +29,9 @@ def main(argv=None) -> int:
         default="float64",
         help="dtype of the runs (default float64)",
     )
-    cmp.add_argument("--coarse-steps", type=int, default=100, help="steps of the coarsest rung (default 100)")
+    cmp.add_argument("--coarse-steps", type=int, default=25, help="steps of the coarsest rung (default 25)")
     cmp.add_argument(
-        "--levels", type=int, default=6, help="rungs of the dt ladder, each halving dt (default 6)"
+        "--levels", type=int, default=8, help="rungs of the dt ladder, each halving dt (default 8)"
     )
     cmp.add_argument(
         "--schemes", default=None, help="comma-separated subset of the schemes (default: all registered)"

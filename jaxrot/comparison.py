@@ -122,8 +122,8 @@ def compare(
     t_end=None,
     particles=100,
     dtype="float64",
-    coarse_steps=100,
-    levels=6,
+    coarse_steps=25,
+    levels=8,
     tolerances=None,
     schemes=None,
     solvers=None,
@@ -439,8 +439,9 @@ def write_outputs(rows, out_dir, plot=True) -> list[Path]:
 def plot_work_precision(rows, path=None, axes=None):
     """Work-precision plot: error against wall time per particle and against torque evaluations.
 
-    Log-log, one line per method (fixed-step schemes solid, adaptive diffrax
-    dashed). Saves to ``path`` when given; draws on ``axes`` (two Axes) when given.
+    Log-log, one line per method (fixed-step schemes solid with circles, adaptive diffrax
+    dashed with squares), the legend outside the axes. Saves to ``path`` when given; draws on
+    ``axes`` (two Axes) when given.
     """
     import matplotlib
 
@@ -450,14 +451,21 @@ def plot_work_precision(rows, path=None, axes=None):
 
     fig = None
     if axes is None:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+        fig, axes = plt.subplots(1, 2, figsize=(12.5, 4.2), constrained_layout=True)
     ax_time, ax_evals = axes
+    # Fixed-step schemes: solid, circles, the ten colours of tab10; adaptive solvers: dashed, in
+    # greys with their own markers (with 13 methods one colour cycle would repeat).
+    fixed_styles = iter(dict(marker="o", linestyle="-", color=c) for c in plt.get_cmap("tab10").colors * 2)
+    adaptive_styles = iter(
+        dict(marker=m, linestyle="--", color=c)
+        for m, c in zip("sD^v" * 2, ("black", "dimgray", "darkgray", "silver") * 2, strict=True)
+    )
     for name in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == name]
-        style = "o-" if mine[0]["kind"] == "fixed" else "s--"
+        style = dict(next(fixed_styles if mine[0]["kind"] == "fixed" else adaptive_styles), label=name)
         err = [r["max_orientation_error_rad"] for r in mine]
-        ax_time.loglog([r["us_per_particle_run"] for r in mine], err, style, label=name)
-        ax_evals.loglog([max(r["torque_evals"], 1) for r in mine], err, style, label=name)
+        ax_time.loglog([r["us_per_particle_run"] for r in mine], err, **style)
+        ax_evals.loglog([max(r["torque_evals"], 1) for r in mine], err, **style)
     first = rows[0]
     ax_time.set(
         xlabel="wall time per particle over the horizon [µs]",
@@ -467,7 +475,8 @@ def plot_work_precision(rows, path=None, axes=None):
     ax_evals.set(xlabel="torque evaluations per particle", ylabel="max orientation error [rad]")
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
-    ax_evals.legend(fontsize="small")
+    # Outside the axes: inside, it covered the high-order rows' lower-left corner.
+    ax_evals.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     if path is not None:
         (fig or ax_time.figure).savefig(path, dpi=120)
     if fig is not None:

@@ -24,7 +24,11 @@ RESULTS = {
     "compile_cpu.json": ("method", "python benchmarks/compile.py"),
     "throughput_cpu.json": ("method", "python benchmarks/throughput.py"),
     "memory_cpu.json": ("scheme", "python benchmarks/memory.py"),
-    "compare_heavy_top.csv": ("method", "python -m jaxrot compare --scene heavy_top"),
+    "compare_heavy_top.json": (
+        "method",
+        "python -m jaxrot compare --out DIR "
+        "(then DIR/compare.json and compare.png to docs/compare_heavy_top.*)",
+    ),
     "gpu_h100/race_heavy_top_float64.json": ("method", "python benchmarks/race.py (on the GPU)"),
     "gpu_h100/tp_f32_1000000.json": ("method", "python benchmarks/throughput.py (on the GPU)"),
 }
@@ -32,7 +36,6 @@ RESULTS = {
 STALE = {
     "throughput_cpu.json": "no commit/date; no rkmk*, srkn*, splitting rows",
     "memory_cpu.json": "a bare list: no machine block; zhao and no_squish only",
-    "compare_heavy_top.csv": "CSV without provenance; no rkmk*, srkn* rows",
     "gpu_h100/race_heavy_top_float64.json": "schema 1: no commit/date (GPU lent once; every scheme covered)",
     "gpu_h100/tp_f32_1000000.json": "schema 1: no commit/date (GPU lent once; every scheme covered)",
 }

@@ -2,11 +2,10 @@
 
 A page writes ``{{ name }}`` of a table in `TABLES` on a line of its own; the hook replaces it
 with a Markdown table built from ``docs/throughput_cpu.json``, ``docs/memory_cpu.json``,
-``docs/compare_heavy_top.csv`` or the GPU results under ``docs/gpu_h100/``,
+``docs/compare_heavy_top.json`` or the GPU results under ``docs/gpu_h100/``,
 so the pages show exactly what the benchmarks wrote.
 """
 
-import csv
 import json
 from pathlib import Path
 
@@ -84,9 +83,17 @@ def memory_table(docs):
     return _table(header, rows)
 
 
+def _compare(docs):
+    """``docs/compare_heavy_top.json``, written by ``python -m jaxrot compare`` (`jaxrot.comparison`)."""
+    return json.loads((docs / "compare_heavy_top.json").read_text())
+
+
+def _setting(r):
+    return f"dt = {r['dt']:.4g}" if r["kind"] == "fixed" else f"tol = {r['tol']:.0e}"
+
+
 def compare_table(docs):
-    with (docs / "compare_heavy_top.csv").open(newline="") as f:
-        data = list(csv.DictReader(f))
+    data = _compare(docs)
     header = [
         "method",
         "setting",
@@ -100,17 +107,67 @@ def compare_table(docs):
     rows = [
         [
             f"`{r['method']}`",
-            f"dt = {float(r['dt']):.4g}" if r["kind"] == "fixed" else f"tol = {float(r['tol']):.0e}",
-            f"{float(r['max_orientation_error_rad']):.1e}",
-            f"{float(r['final_omega_error']):.1e}",
-            f"{float(r['rel_energy_drift']):.1e}",
+            _setting(r),
+            f"{r['max_orientation_error_rad']:.1e}",
+            f"{r['final_omega_error']:.1e}",
+            "—" if r["rel_energy_drift"] is None else f"{r['rel_energy_drift']:.1e}",
             r["torque_evals"],
-            _sig(float(r["us_per_particle_step"]), 2),
-            _sig(float(r["us_per_particle_run"]), 3),
+            _sig(r["us_per_particle_step"], 2),
+            _sig(r["us_per_particle_run"], 3),
         ]
-        for r in data
+        for r in data["rows"]
     ]
     return _table(header, rows)
+
+
+def compare_budget_table(docs):
+    """Per error budget: the fastest jaxrot row, the fastest diffrax row and their time ratio."""
+    data = _compare(docs)
+    rows = data["rows"]
+    budgets = [b["budget_rad"] for b in data["recommendation"]]
+    out = []
+    for budget in budgets:
+        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        mine = min((r for r in ok if not r["method"].startswith("diffrax")), key=_run_time, default=None)
+        theirs = min((r for r in ok if r["method"].startswith("diffrax")), key=_run_time, default=None)
+        out.append(
+            [
+                f"{budget:.0e}",
+                _pick(mine),
+                _pick(theirs),
+                f"{_run_time(theirs) / _run_time(mine):.1f}×" if mine and theirs else "—",
+            ]
+        )
+    header = ["budget [rad]", "fastest jaxrot row", "fastest diffrax row", "diffrax time / jaxrot time"]
+    m = data["machine"]
+    note = (
+        f"\n\n*From `docs/compare_heavy_top.json`: {m['cpus']} CPU cores, Python {m['python']}, "
+        f"jax {m['jax']}, diffrax {m['diffrax']}, commit {m['commit']}, {m['date']}.*"
+    )
+    return _table(header, out) + note
+
+
+def compare_orders(docs):
+    """The measured orders of the fixed-step rows, one sentence."""
+    orders = _compare(docs)["orders"]
+    fitted = [f"`{name}` {order:.2f}" for name, order in orders.items() if order is not None]
+    missing = [f"`{name}`" for name, order in orders.items() if order is None]
+    text = (
+        "Measured orders (log-log fit of each ladder's rungs between 0.1 rad and its floor): "
+        + ", ".join(fitted)
+        + "."
+    )
+    if missing:
+        text += " Fewer than three rungs in that range: " + ", ".join(missing) + "."
+    return text
+
+
+def _run_time(r):
+    return r["us_per_particle_run"]
+
+
+def _pick(r):
+    return "none" if r is None else f"`{r['method']}` {_setting(r)}: {_sig(_run_time(r), 3)} µs"
 
 
 def _gpu_throughput_rows(docs):
@@ -188,6 +245,8 @@ TABLES = {
     "gradient_compile_table": gradient_compile_table,
     "memory_table": memory_table,
     "compare_table": compare_table,
+    "compare_budget_table": compare_budget_table,
+    "compare_orders": compare_orders,
     "gpu_throughput_table": gpu_throughput_table,
     "gpu_race_table": gpu_race_table,
 }
