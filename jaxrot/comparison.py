@@ -266,9 +266,10 @@ def compare(
                 "compile_s": compile_s,
             }
         )
-        ladder = [r["max_orientation_error_rad"] for r in rows if r["method"] == name]
-        if kind == "fixed" and (ladder[-1] < LADDER_FLOOR or stalled(ladder)):
-            finished.add(name)
+        if kind == "fixed":
+            ladder = [r["max_orientation_error_rad"] for r in rows if r["method"] == name]
+            if ladder[-1] < LADDER_FLOOR or stalled(ladder):
+                finished.add(name)
     return rows
 
 

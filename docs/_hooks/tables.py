@@ -121,30 +121,20 @@ def compare_table(docs):
 
 
 def compare_budget_table(docs):
-    """Per error budget: the fastest jaxrot row, the fastest diffrax row and their time ratio."""
+    """Per error budget: the fastest jaxrot row, the fastest diffrax row and their time ratio
+    (`jaxrot.comparison.recommend` on each side's rows, at the budgets of the run's own recommendation)."""
+    from jaxrot.comparison import recommend
+
     data = _compare(docs)
-    rows = data["rows"]
     budgets = [b["budget_rad"] for b in data["recommendation"]]
+    ours = [r for r in data["rows"] if not r["method"].startswith("diffrax")]
+    theirs = [r for r in data["rows"] if r["method"].startswith("diffrax")]
     out = []
-    for budget in budgets:
-        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
-        mine = min((r for r in ok if not r["method"].startswith("diffrax")), key=_run_time, default=None)
-        theirs = min((r for r in ok if r["method"].startswith("diffrax")), key=_run_time, default=None)
-        out.append(
-            [
-                f"{budget:.0e}",
-                _pick(mine),
-                _pick(theirs),
-                f"{_run_time(theirs) / _run_time(mine):.1f}×" if mine and theirs else "—",
-            ]
-        )
+    for (budget, mine), (_, best) in zip(recommend(ours, budgets), recommend(theirs, budgets), strict=True):
+        ratio = f"{_run_time(best) / _run_time(mine):.1f}×" if mine and best else "—"
+        out.append([f"{budget:.0e}", _pick(mine), _pick(best), ratio])
     header = ["budget [rad]", "fastest jaxrot row", "fastest diffrax row", "diffrax time / jaxrot time"]
-    m = data["machine"]
-    note = (
-        f"\n\n*From `docs/compare_heavy_top.json`: {m['cpus']} CPU cores, Python {m['python']}, "
-        f"jax {m['jax']}, diffrax {m['diffrax']}, commit {m['commit']}, {m['date']}.*"
-    )
-    return _table(header, out) + note
+    return _table(header, out) + _provenance("compare_heavy_top.json", data["machine"])
 
 
 def compare_orders(docs):
@@ -160,6 +150,15 @@ def compare_orders(docs):
     if missing:
         text += " Fewer than three rungs in that range: " + ", ".join(missing) + "."
     return text
+
+
+def _provenance(name, machine, context=""):
+    """The italic line under a table from a schema-2 results file: where, on what, from which commit."""
+    m = machine
+    return (
+        f"\n\n*From `docs/{name}`{context}: {m['cpus']} CPU cores, Python {m['python']}, "
+        f"jax {m['jax']}, diffrax {m['diffrax']}, commit {m['commit']}, {m['date']}.*"
+    )
 
 
 def _run_time(r):
@@ -230,12 +229,7 @@ def gradient_compile_table(docs):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     data = json.loads((docs / "compile_cpu.json").read_text())
-    m = data["machine"]
-    note = (
-        f"\n\n*From `docs/compile_cpu.json` ({data['problem']}): {m['cpus']} CPU cores, "
-        f"Python {m['python']}, "
-        f"jax {m['jax']}, diffrax {m['diffrax']}, commit {m['commit']}, {m['date']}.*"
-    )
+    note = _provenance("compile_cpu.json", data["machine"], f" ({data['problem']})")
     return module.table(data["rows"]) + note
 
 
