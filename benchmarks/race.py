@@ -337,7 +337,7 @@ def main():
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--time-cap", type=float, default=2.0, help="stop a ladder past this many s per run")
     parser.add_argument("--schemes", default=None, help="comma-separated names (default: all)")
-    parser.add_argument("--out", default="docs/race")
+    parser.add_argument("--out", default="docs/race_cpu", help="folder of race_DTYPE.json and the plots")
     parser.add_argument(
         "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
     )
@@ -347,7 +347,7 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
     info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
     print(f"machine: {info}")
-    report = {"machine": info, "scenes": {}}
+    report = {"machine": info, "options": vars(opts), "scenes": {}}
     schemes = opts.schemes.split(",") if opts.schemes else None
     for scene_name in opts.scenes.split(","):
         print(f"== {scene_name} ({opts.dtype}, N = {opts.n})", flush=True)
