@@ -17,8 +17,11 @@ Both sides are timed compiled (median of 3 runs) and with their first call (comp
 fits in units of jaxrot's standard errors, and the final losses.
 
     python benchmarks/identify_speed.py      # ~3 minutes on 2 cores
+    python benchmarks/identify_speed.py --json docs/identify_speed_cpu.json  # the file the docs render
 """
 
+import argparse
+import json
 import pathlib
 import statistics
 import sys
@@ -127,8 +130,12 @@ def residuals(p, args):
     return jnp.where(jnp.isnan(r_q), 0.0, r_q), r_w
 
 
-def main():
-    print(machine_info())
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", default=None, help="also write the rows here")
+    opts = parser.parse_args(argv)
+    info = machine_info()
+    print(info)
     experiments, _ = satellite_experiments(0)
     clean, _ = satellite_experiments(0, noise=False)
     data, clean_data = stack(experiments), stack(clean)
@@ -235,6 +242,10 @@ def main():
     print(f"\nFastest diffrax + optimistix fit within 0.1 se of jaxrot's: {best[0]}")
     print(f"  compiled {best[2]:.2f} s against jaxrot's {run:.2f} s: jaxrot {best[2] / run:.1f}× faster")
     print(f"  first call {best[1]:.1f} s against jaxrot's {first:.1f} s: {best[1] / first:.2f}×")
+    if opts.json:
+        keys = ("fit", "first_call_s", "compiled_s", "loss", "max_gap_se", "model_error_rad")
+        with open(opts.json, "w") as f:
+            json.dump({"machine": info, "rows": [dict(zip(keys, r, strict=True)) for r in rows]}, f, indent=2)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Peak memory of a long `jaxrot.rollout`: 10⁶ bodies × 10³ steps, and its growth with the step count.
+"""Peak memory of a `jaxrot.rollout` of 10⁶ bodies, every scheme, and its growth with the saved states.
 
 Each configuration runs in a fresh subprocess, so the peak resident set size
 (``ru_maxrss``) is that run's alone. Printed per row: the process peak, the
@@ -7,7 +7,8 @@ the compilation), and XLA's own accounting of the compiled program (arguments, o
 temporaries). The heavy-top torque and random orientations are those of
 `benchmarks/throughput.py`.
 
-    python benchmarks/memory.py                       # 10⁶ × 10³, saving every 100 and 1000 steps
+    python benchmarks/memory.py                       # 10⁶ bodies × 20 steps, saving 2 or 11 states
+    python benchmarks/memory.py --json docs/memory_cpu.json   # the results file the docs render
     python benchmarks/memory.py --n 100000 --steps 100,1000,10000 --save-every 100
 """
 
@@ -71,15 +72,19 @@ def measure(n, steps, save_every, scheme, chunk=0):
 
 
 def main(argv=None):
+    import jax
+
+    import jaxrot
+    from jaxrot.comparison import machine_info
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, default=1_000_000)
-    parser.add_argument("--steps", default="1000", help="comma-separated step counts")
-    parser.add_argument("--save-every", default="1000,100", help="comma-separated")
-    parser.add_argument("--schemes", default="zhao,no_squish")
+    parser.add_argument("--steps", default="20", help="comma-separated step counts")
+    parser.add_argument("--save-every", default="20,2", help="comma-separated")
+    parser.add_argument("--schemes", default=",".join(jaxrot.SCHEMES), help="comma-separated (default: all)")
     parser.add_argument("--chunk-steps", type=int, default=0, help="also run in chunks of this many steps")
     parser.add_argument("--json", default=None)
     ns = parser.parse_args(argv)
-    import jax
 
     print(
         f"jaxrot rollout memory — heavy top, float64, N = {ns.n:.0e}; {platform.machine()}, "
@@ -110,7 +115,7 @@ def main(argv=None):
                     )
     if ns.json:
         with open(ns.json, "w") as f:
-            json.dump(rows, f, indent=2)
+            json.dump({"machine": machine_info(), "options": vars(ns), "rows": rows}, f, indent=2)
     return 0
 
 

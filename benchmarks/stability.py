@@ -12,9 +12,11 @@
 
     python benchmarks/stability.py                 # everything: a few minutes on one CPU core
     python benchmarks/stability.py --steps 100000  # shorter long runs
+    python benchmarks/stability.py --json docs/stability_cpu.json  # the results file the docs render
 """
 
 import argparse
+import json
 import os
 import platform
 import sys
@@ -32,6 +34,7 @@ from tqdm.auto import tqdm
 
 import jaxrot
 from jaxrot import analytic, quaternion as quat, stability
+from jaxrot.comparison import machine_info
 from jaxrot.schemes import Rozmanov
 
 
@@ -64,55 +67,102 @@ def fmt(x):
     return f"{x:.3g}" if x != 0 else "0"
 
 
-def limits_table(schemes):
-    columns = [(body, dtype) for body in BODIES for dtype in DTYPES]
+def limits(schemes):
+    """Rows ``{scheme, body, dtype, limit}``: `stability.max_stable_rotation_per_step` (rad per step)."""
     rows = []
     for name in tqdm(schemes, desc="limits"):
-        cells = []
-        for body, dtype in columns:
-            limit = stability.max_stable_rotation_per_step(name, inertia=BODIES[body], dtype=DTYPES[dtype])
-            cells.append("≥ 10" if limit >= 10 else fmt(limit))
-        rows.append(f"| `{name}` | " + " | ".join(cells) + " |")
-    head = "| scheme | " + " | ".join(f"{body} {dtype}" for body, dtype in columns) + " |"
-    sep = "|---" * (len(columns) + 1) + "|"
-    return "\n".join([head, sep, *rows])
+        for body in BODIES:
+            for dtype in DTYPES:
+                inertia, dtype_ = BODIES[body], DTYPES[dtype]
+                limit = stability.max_stable_rotation_per_step(name, inertia=inertia, dtype=dtype_)
+                rows.append({"scheme": name, "body": body, "dtype": dtype, "limit": float(limit)})
+    return rows
 
 
-def blow_up_table(schemes):
+def blow_ups(schemes):
+    """Rows ``{scheme, dtype, first_nonfinite, max_norm_error_below}`` on a ladder 1e-12 … 10 rad per step."""
     ladder = np.logspace(-12, 1, 131)
     rows = []
     for name in tqdm(schemes, desc="blow-up"):
-        cells = []
         for dtype in DTYPES:
             result = stability.rotation_ladder(name, ladder, dtype=DTYPES[dtype])
             bad = ladder[~result.finite]
             first = float(bad[0]) if bad.size else None
             below = result.norm_error[ladder < (first if first is not None else np.inf)]
-            cells += ["none ≤ 10" if first is None else fmt(first), fmt(float(below.max()))]
-        rows.append(f"| `{name}` | " + " | ".join(cells) + " |")
-    head = (
-        "| scheme | first non-finite |ω|Δt, float64 | max ‖q‖−1 below it | "
-        "first non-finite, float32 | max ‖q‖−1 below it |"
-    )
-    return "\n".join([head, "|---|---|---|---|---|", *rows])
+            rows.append(
+                {
+                    "scheme": name,
+                    "dtype": dtype,
+                    "first_nonfinite": first,
+                    "max_norm_error_below": float(below.max()),
+                }
+            )
+    return rows
 
 
-def drift_table(schemes, n_steps):
+def drifts(schemes, n_steps):
+    """Rows of `stability.long_run_drift` over ``n_steps`` steps, with the wall time (compile included)."""
     rows = []
     for dtype in DTYPES:
         for name in tqdm(schemes, desc=f"{n_steps} steps {dtype}"):
             start = time.perf_counter()
             drift = stability.long_run_drift(name, n_steps, dtype=DTYPES[dtype])
-            wall = time.perf_counter() - start
-            nonfinite = (
-                "" if drift.first_nonfinite_step is None else f" (non-finite at {drift.first_nonfinite_step})"
-            )
             rows.append(
-                f"| `{name}` | {dtype} | {fmt(drift.norm)} | {fmt(drift.energy)}{nonfinite} | "
-                f"{fmt(drift.momentum)} | {wall:.1f} |"
+                {
+                    "scheme": name,
+                    "dtype": dtype,
+                    "steps": n_steps,
+                    "norm": float(drift.norm),
+                    "energy": float(drift.energy),
+                    "momentum": float(drift.momentum),
+                    "first_nonfinite_step": drift.first_nonfinite_step,
+                    "wall_s": time.perf_counter() - start,
+                }
             )
-    head = "| scheme | dtype | max ‖q‖−1 | max ΔE/E₀ | max ‖ΔL‖/‖L₀‖ | wall s (incl. compile) |"
-    return "\n".join([head, "|---|---|---|---|---|---|", *rows])
+    return rows
+
+
+def limits_table(rows):
+    columns = [(body, dtype) for body in BODIES for dtype in DTYPES]
+    value = {(r["scheme"], r["body"], r["dtype"]): r["limit"] for r in rows}
+    lines = [
+        "| scheme | " + " | ".join(f"{body} {dtype}" for body, dtype in columns) + " |",
+        "|---" * (len(columns) + 1) + "|",
+    ]
+    for name in dict.fromkeys(r["scheme"] for r in rows):
+        cells = ["≥ 10" if value[name, *c] >= 10 else fmt(value[name, *c]) for c in columns]
+        lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def blow_up_table(rows):
+    lines = [
+        "| scheme | first non-finite |ω|Δt, float64 | max ‖q‖−1 below it | "
+        "first non-finite, float32 | max ‖q‖−1 below it |",
+        "|---|---|---|---|---|",
+    ]
+    for name in dict.fromkeys(r["scheme"] for r in rows):
+        cells = []
+        for r in (r for r in rows if r["scheme"] == name):
+            first = r["first_nonfinite"]
+            cells += ["none ≤ 10" if first is None else fmt(first), fmt(r["max_norm_error_below"])]
+        lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def drift_table(rows):
+    lines = [
+        "| scheme | dtype | max ‖q‖−1 | max ΔE/E₀ | max ‖ΔL‖/‖L₀‖ | wall s (incl. compile) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        step = r["first_nonfinite_step"]
+        nonfinite = "" if step is None else f" (non-finite at {step})"
+        lines.append(
+            f"| `{r['scheme']}` | {r['dtype']} | {fmt(r['norm'])} | {fmt(r['energy'])}{nonfinite} | "
+            f"{fmt(r['momentum'])} | {r['wall_s']:.1f} |"
+        )
+    return "\n".join(lines)
 
 
 def bad_inputs():
@@ -215,16 +265,28 @@ def main(argv=None):
     parser.add_argument(
         "--schemes", default=",".join(jaxrot.SCHEMES), help="comma-separated scheme names (default: all)"
     )
+    parser.add_argument("--json", default=None, help="also write the rows here")
     opts = parser.parse_args(argv)
     schemes = opts.schemes.split(",")
+    info = machine_info()
+    results = {
+        "machine": info,
+        "options": vars(opts),
+        "limits": limits(schemes),
+        "blow_up": blow_ups(schemes),
+        "drift": drifts(schemes, opts.steps),
+    }
+    if opts.json:
+        with open(opts.json, "w") as f:
+            json.dump(results, f, indent=2)
     print("# jaxrot stability limits\n")
     print(header(), "\n")
     print("## Largest |ω|Δt (rad per step) with error per step ≤ 1e-3 rad\n")
-    print(limits_table(schemes), "\n")
+    print(limits_table(results["limits"]), "\n")
     print("## Blow-up within 8 steps (generic body)\n")
-    print(blow_up_table(schemes), "\n")
+    print(blow_up_table(results["blow_up"]), "\n")
     print(f"## Drift over {opts.steps} steps (free body, dt = 0.01, sampled every 1000 steps)\n")
-    print(drift_table(schemes, opts.steps), "\n")
+    print(drift_table(results["drift"]), "\n")
     print("## Bad input\n")
     print(messages(bad_inputs(), ValueError), "\n")
     print("## Valid but extreme input, with `runtime_check=True`\n")

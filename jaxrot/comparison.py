@@ -405,6 +405,7 @@ def machine_info() -> dict:
         "jaxrot": importlib.metadata.version("jaxrot"),
         "backend": jax.default_backend(),
         "device": str(jax.devices()[0].device_kind),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }
 
 

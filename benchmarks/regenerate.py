@@ -1,0 +1,135 @@
+"""Rerun the benchmarks behind every published number: each writes the results file its docs page renders.
+
+Every table and figure of README.md and the documentation site is rendered (by
+``docs/_hooks/tables.py``) from a results file under ``docs/``, and each results file records
+the machine, the versions, the commit and the date it was measured on
+(`jaxrot.comparison.machine_info`). This script reruns the benchmarks that write them, one after
+another in fresh processes, so that nothing else competes for the cores while one is timed.
+
+    python benchmarks/regenerate.py --list              # the jobs, their files and rough times
+    python benchmarks/regenerate.py                     # all of them (about 1.5 h on 2 cores)
+    python benchmarks/regenerate.py --quick             # all but the long ones (races, compile, compare)
+    python benchmarks/regenerate.py --only memory,stability
+
+The GPU results under ``docs/gpu_h100/`` need a GPU machine and are made there by hand with the
+commands of docs/performance.md ("On a GPU"). The ``jax_md`` column of the throughput table needs
+``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
+left out. Run from the repository root with a clean checkout: a results file made from uncommitted
+package or benchmark code carries ``+dirty`` in its commit.
+"""
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+class Job(NamedTuple):
+    files: tuple[str, ...]  # under docs/
+    argv: tuple[str, ...]  # after the interpreter
+    minutes: float  # on this project's 2-core CPU
+    long: bool = False
+
+
+JOBS = {
+    "compare": Job(
+        ("compare_heavy_top.json", "compare_heavy_top.png"),
+        ("-m", "jaxrot", "compare", "--out", "{tmp}"),
+        4,
+        True,
+    ),
+    "race64": Job(
+        ("race_cpu/race_float64.json",),
+        ("benchmarks/race.py", "--repeats", "3", "--time-cap", "1.0", "--out", "docs/race_cpu"),
+        31,
+        True,
+    ),
+    "race32": Job(
+        ("race_cpu/race_float32.json",),
+        (
+            "benchmarks/race.py",
+            "--dtype",
+            "float32",
+            "--repeats",
+            "3",
+            "--time-cap",
+            "1.0",
+            "--out",
+            "docs/race_cpu",
+        ),
+        12,
+        True,
+    ),
+    "compile": Job(("compile_cpu.json",), ("benchmarks/compile.py",), 8, True),
+    "throughput": Job(
+        ("throughput_cpu.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000,1000000",
+            "--json",
+            "docs/throughput_cpu.json",
+        ),
+        12,
+    ),
+    "memory": Job(("memory_cpu.json",), ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"), 5),
+    "stability": Job(
+        ("stability_cpu.json",), ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"), 5
+    ),
+    "identify_speed": Job(
+        ("identify_speed_cpu.json",),
+        ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
+        3,
+    ),
+}
+
+
+def run_job(name, job, python):
+    """Run one job; ``{tmp}`` in its argv is a scratch folder whose outputs are copied to ``docs/``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        argv = [python, *(a.replace("{tmp}", tmp) for a in job.argv)]
+        print(f"== {name}: {' '.join(argv)}", flush=True)
+        start = time.perf_counter()
+        subprocess.run(argv, cwd=ROOT, check=True)
+        if name == "compare":
+            shutil.copy(Path(tmp) / "compare.json", DOCS / "compare_heavy_top.json")
+            shutil.copy(Path(tmp) / "compare.png", DOCS / "compare_heavy_top.png")
+        print(
+            f"== {name}: {(time.perf_counter() - start) / 60:.1f} min; wrote {', '.join(job.files)}",
+            flush=True,
+        )
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", default=None, help=f"comma-separated jobs of {list(JOBS)}")
+    parser.add_argument("--quick", action="store_true", help="skip the long jobs")
+    parser.add_argument("--list", action="store_true", help="list the jobs and exit")
+    parser.add_argument("--python", default=sys.executable, help="interpreter for the benchmarks")
+    opts = parser.parse_args(argv)
+    if opts.list:
+        for name, job in JOBS.items():
+            files = ", ".join(f"docs/{f}" for f in job.files)
+            print(f"{name:15s} ~{job.minutes:>3.0f} min {'long' if job.long else '':5s} {files}")
+        return 0
+    chosen = (
+        opts.only.split(",") if opts.only else [n for n, j in JOBS.items() if not (opts.quick and j.long)]
+    )
+    unknown = [n for n in chosen if n not in JOBS]
+    if unknown:
+        parser.error(f"unknown jobs {unknown}; known: {list(JOBS)}")
+    for name in chosen:
+        run_job(name, JOBS[name], opts.python)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
