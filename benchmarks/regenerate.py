@@ -80,6 +80,21 @@ JOBS = {
         ),
         12,
     ),
+    # jax 0.10.2 (the default install of Python 3.11) beside the newest jax of the throughput job.
+    "throughput_jax010": Job(
+        ("throughput_cpu_jax010.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000",
+            "--dtype",
+            "float64",
+            "--no-peer",
+            "--json",
+            "docs/throughput_cpu_jax010.json",
+        ),  # fmt: skip
+        5,
+    ),
     "memory": Job(("memory_cpu.json",), ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"), 5),
     "stability": Job(
         ("stability_cpu.json",), ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"), 5
