@@ -52,6 +52,8 @@ JOBS = {
         31,
         True,
     ),
+    # Draws only: the headline figure of README and the home page, from race64's results.
+    "headline": Job(("headline.png",), ("benchmarks/headline.py",), 0.1),
     "race32": Job(
         ("race_cpu/race_float32.json",),
         (
