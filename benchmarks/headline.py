@@ -48,7 +48,10 @@ def envelope(rows):
 
 def draw(race, path):
     scenes = list(race["scenes"])
-    fig, axes = plt.subplots(1, len(scenes), figsize=(4.6 * len(scenes), 4.0), constrained_layout=True)
+    fig, axes = plt.subplots(
+        1, len(scenes), figsize=(4.6 * len(scenes), 4.0), constrained_layout=True, squeeze=False
+    )
+    axes = axes[0]
     for ax, scene in zip(axes, scenes, strict=True):
         rows = [r for r in race["scenes"][scene]["rows"] if r["max_orientation_error_rad"] <= 1e-1]
         for label, (member, style) in FAMILIES.items():
