@@ -38,11 +38,9 @@ def _pivot(docs, field, scale, digits):
     ]
     header = ["dtype", "N"] + [f"`{m}`" if m != "jax_md" else "jax_md (NO_SQUISH)" for m in methods]
     machine = data["machine"]
-    note = (
-        f"\n\n*From `docs/throughput_cpu.json`: {machine['cpus']} CPU cores, Python {machine['python']}, "
-        f"jax {machine['jax']}, jax_md {machine.get('jax_md', '–')}.*"
+    return _table(header, rows) + _provenance(
+        "throughput_cpu.json", machine, f" (jax_md {machine.get('jax_md', '–')})"
     )
-    return _table(header, rows) + note
 
 
 def throughput_table(docs):
@@ -57,6 +55,7 @@ def memory_table(docs):
     data = json.loads((docs / "memory_cpu.json").read_text())
     header = [
         "scheme",
+        "steps",
         "save every",
         "chunk steps",
         "saved states",
@@ -69,6 +68,7 @@ def memory_table(docs):
     rows = [
         [
             f"`{r['scheme']}`",
+            r["steps"],
             r["save_every"],
             r["chunk_steps"] or "–",
             r["saved_states"],
@@ -76,11 +76,14 @@ def memory_table(docs):
             f"{r['rss_before_mib']:.0f}",
             f"{r['xla_output_mib']:.0f}",
             f"{r['xla_temp_mib']:.0f}",
-            f"{r['seconds']:.0f}",
+            f"{r['seconds']:.1f}",
         ]
-        for r in data
+        for r in data["rows"]
     ]
-    return _table(header, rows)
+    n = data["rows"][0]["n"]
+    return _table(header, rows) + _provenance(
+        "memory_cpu.json", data["machine"], f" ({n:.0e} bodies, float64)"
+    )
 
 
 def _compare(docs):
@@ -122,19 +125,25 @@ def compare_table(docs):
 
 def compare_budget_table(docs):
     """Per error budget: the fastest jaxrot row, the fastest diffrax row and their time ratio
-    (`jaxrot.comparison.recommend` on each side's rows, at the budgets of the run's own recommendation)."""
-    from jaxrot.comparison import recommend
+    (`jaxrot.comparison.budget_table`)."""
+    from jaxrot.comparison import budget_table
 
     data = _compare(docs)
-    budgets = [b["budget_rad"] for b in data["recommendation"]]
-    ours = [r for r in data["rows"] if not r["method"].startswith("diffrax")]
-    theirs = [r for r in data["rows"] if r["method"].startswith("diffrax")]
-    out = []
-    for (budget, mine), (_, best) in zip(recommend(ours, budgets), recommend(theirs, budgets), strict=True):
-        ratio = f"{_run_time(best) / _run_time(mine):.1f}×" if mine and best else "—"
-        out.append([f"{budget:.0e}", _pick(mine), _pick(best), ratio])
+    out = [
+        [f"{budget:.0e}", _pick(mine), _pick(best), "—" if ratio is None else f"{ratio:.1f}×"]
+        for budget, mine, best, ratio in budget_table(data["rows"])
+    ]
     header = ["budget [rad]", "fastest jaxrot row", "fastest diffrax row", "diffrax time / jaxrot time"]
     return _table(header, out) + _provenance("compare_heavy_top.json", data["machine"])
+
+
+def compare_ratios(docs):
+    """(smallest, largest) speed-up of jaxrot's fastest row over diffrax's, over the budgets of
+    ``docs/compare_heavy_top.json`` where both sides have a row."""
+    from jaxrot.comparison import budget_table
+
+    ratios = [ratio for *_, ratio in budget_table(_compare(docs)["rows"]) if ratio is not None]
+    return min(ratios), max(ratios)
 
 
 def compare_orders(docs):
@@ -233,6 +242,361 @@ def gradient_compile_table(docs):
     return module.table(data["rows"]) + note
 
 
+def _race(docs, dtype):
+    return json.loads((docs / "race_cpu" / f"race_{dtype}.json").read_text())
+
+
+def _race_cell(row):
+    method = row["jaxrot"].split()[0] if row["jaxrot"] not in (None, "none") else None
+    if method is None:
+        return "no row"
+    if row["ratio"] is None:
+        return f"`{method}`: no diffrax row"
+    return f"`{method}`: {row['ratio']:.2f}"
+
+
+def _race_table(docs, dtype):
+    """Budget × scene: the fastest jaxrot row and its speed-up over diffrax's fastest meeting the budget."""
+    data = _race(docs, dtype)
+    scenes = list(data["scenes"])
+    budgets = [row["budget"] for row in data["scenes"][scenes[0]]["table"]]
+    rows = [
+        [f"{b:.0e}"] + [_race_cell(data["scenes"][s]["table"][i]) for s in scenes]
+        for i, b in enumerate(budgets)
+    ]
+    o = data["options"]
+    context = f" (N = {o['n']}, --repeats {o['repeats']} --time-cap {o['time_cap']})"
+    return _table([f"budget ({dtype})", *scenes], rows) + _provenance(
+        f"race_cpu/race_{dtype}.json", data["machine"], context
+    )
+
+
+def race_ratios(docs, dtype="float64"):
+    """(smallest, largest) speed-up of jaxrot's fastest row over diffrax's, over every budget and scene
+    where both sides have a row, and the cells where jaxrot is not the faster (ratio ≤ 1)."""
+    data = _race(docs, dtype)
+    cells = [(s, row) for s, scene in data["scenes"].items() for row in scene["table"]]
+    ratios = [row["ratio"] for _, row in cells if row["ratio"] is not None]
+    slower = [
+        f"{s} at {row['budget']:.0e}" for s, row in cells if row["ratio"] is not None and row["ratio"] <= 1
+    ]
+    return min(ratios), max(ratios), slower
+
+
+def race_table_float64(docs):
+    return _race_table(docs, "float64")
+
+
+def race_table_float32(docs):
+    return _race_table(docs, "float32")
+
+
+def race_summary(docs):
+    """One sentence from the float64 race: the range of speed-ups, and any cell diffrax wins."""
+    low, high, slower = race_ratios(docs)
+    if slower:
+        return (
+            f"jaxrot's fastest row is {low:.2f}× to {high:.2f}× diffrax's fastest where both meet a budget; "
+            f"diffrax is as fast or faster in {', '.join(slower)}."
+        )
+    return (
+        f"jaxrot has the fastest row at every budget of every scene in float64, "
+        f"{low:.2f}× to {high:.2f}× faster than diffrax's fastest row meeting the same budget."
+    )
+
+
+def _stability(docs):
+    return json.loads((docs / "stability_cpu.json").read_text())
+
+
+def _limit(x):
+    return "≥ 10" if x >= 10 else _sig(x)
+
+
+def stability_limits_table(docs):
+    """Largest |ω|Δt per scheme and body (float64; float32 after a slash where it differs)."""
+    data = _stability(docs)
+    value = {(r["scheme"], r["body"], r["dtype"]): r["limit"] for r in data["limits"]}
+    bodies = list(dict.fromkeys(r["body"] for r in data["limits"]))
+    rows = []
+    for name in dict.fromkeys(r["scheme"] for r in data["limits"]):
+        cells = []
+        for body in bodies:
+            f64, f32 = _limit(value[name, body, "float64"]), _limit(value[name, body, "float32"])
+            cells.append(f64 if f64 == f32 else f"{f64} / {f32}")
+        rows.append([f"[`{name}`](schemes/{name}.md)", *cells])
+    return _table(["scheme", *bodies], rows) + _provenance("stability_cpu.json", data["machine"])
+
+
+def stability_blow_up_table(docs):
+    """The first |ω|Δt (of 131 from 1e-12 to 10) with a non-finite result within 8 steps, per dtype."""
+    data = _stability(docs)
+    first = {(r["scheme"], r["dtype"]): r["first_nonfinite"] for r in data["blow_up"]}
+    rows = [
+        [f"`{name}`"]
+        + ["none ≤ 10" if first[name, d] is None else _sig(first[name, d]) for d in ("float64", "float32")]
+        for name in dict.fromkeys(r["scheme"] for r in data["blow_up"])
+    ]
+    return _table(["scheme", "first non-finite |ω|Δt, float64", "float32"], rows)
+
+
+def stability_drift_table(docs):
+    """Drifts of a long torque-free run per scheme and dtype."""
+    data = _stability(docs)
+    rows = []
+    for r in data["drift"]:
+        energy = _sig(r["energy"], 2) + ("" if r["first_nonfinite_step"] is None else " (NaN)")
+        rows.append([f"`{r['scheme']}`", r["dtype"], _sig(r["norm"], 2), energy, _sig(r["momentum"], 2)])
+    steps = data["drift"][0]["steps"]
+    header = ["scheme", "dtype", "max ‖q‖ − 1", "max ΔE / E₀", "max ‖ΔL‖ / ‖L₀‖"]
+    return _table(header, rows) + _provenance("stability_cpu.json", data["machine"], f" ({steps:.0e} steps)")
+
+
+def identify_speed_table(docs):
+    """`benchmarks/identify_speed.py`'s fits: jaxrot.identify and the diffrax + optimistix rows."""
+    data = json.loads((docs / "identify_speed_cpu.json").read_text())
+    base = data["rows"][0]["compiled_s"]
+    header = ["fit", "first call [s]", "compiled [s]", "loss", "max Δ vs jaxrot [se]", "model error [rad]"]
+    header.append("time / jaxrot's")
+    rows = [
+        [
+            r["fit"],
+            f"{r['first_call_s']:.1f}",
+            f"{r['compiled_s']:.2f}",
+            f"{r['loss']:.1f}",
+            f"{r['max_gap_se']:.2f}",
+            f"{r['model_error_rad']:.1e}",
+            f"{r['compiled_s'] / base:.2f}",
+        ]
+        for r in data["rows"]
+    ]
+    ours = data["rows"][0]
+    same = [r for r in data["rows"][1:] if r["max_gap_se"] < 0.1]
+    best = min(same, key=lambda r: r["compiled_s"])
+    run, first = best["compiled_s"] / ours["compiled_s"], best["first_call_s"] / ours["first_call_s"]
+    summary = (
+        f"\n\nThe fastest diffrax + optimistix fit within 0.1 standard errors of jaxrot's is {best['fit']}: "
+        f"compiled {best['compiled_s']:.2f} s against `identify`'s {ours['compiled_s']:.2f} s "
+        f"(jaxrot {run:.2f}× as fast), first call {best['first_call_s']:.1f} s against "
+        f"{ours['first_call_s']:.1f} s ({first:.2f}×)."
+    )
+    return _table(header, rows) + summary + _provenance("identify_speed_cpu.json", data["machine"])
+
+
+def throughput_peer_ratios(docs):
+    """One sentence per dtype: each scheme's throughput over jax_md's NO_SQUISH at the largest N."""
+    data = json.loads((docs / "throughput_cpu.json").read_text())
+    rate = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in data["rows"]}
+    if not any(m == "jax_md" for _, _, m in rate):
+        return "*jax_md was not installed for this run: no peer column.*"
+    out = []
+    for dtype in dict.fromkeys(d for d, _, _ in rate):
+        n = max(k for d, k, m in rate if d == dtype and m == "jax_md")
+        ratios = [
+            f"`{m}` {rate[dtype, n, m] / rate[dtype, n, 'jax_md']:.2f}×"
+            for d, k, m in rate
+            if (d, k) == (dtype, n) and m != "jax_md"
+        ]
+        out.append(f"{dtype}, N = {_power_of_ten(n)}: " + ", ".join(ratios))
+    return "Throughput over jax_md's NO_SQUISH in the same run (> 1: faster) — " + "; ".join(out) + "."
+
+
+def throughput_jax_versions(docs):
+    """Float64 throughput with jax 0.10.2 (M/s) and, in brackets, its ratio to the newest jax's run."""
+    old = json.loads((docs / "throughput_cpu_jax010.json").read_text())
+    new = json.loads((docs / "throughput_cpu.json").read_text())
+    rate_new = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in new["rows"]}
+    methods = list(dict.fromkeys(r["method"] for r in old["rows"]))
+    rate_old = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in old["rows"]}
+    rows = []
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in old["rows"]):
+        cells = []
+        for m in methods:
+            mine, theirs = rate_old.get((dtype, n, m)), rate_new.get((dtype, n, m))
+            ratio = f" ({mine / theirs:.2f}×)" if mine and theirs else ""
+            cells.append("–" if mine is None else f"{mine * 1e-6:.3g}{ratio}")
+        rows.append([dtype, _power_of_ten(n), *cells])
+    m = new["machine"]
+    note = f" (ratios against `docs/throughput_cpu.json`: jax {m['jax']}, commit {m['commit']})"
+    return _table(["dtype", "N", *[f"`{m}`" for m in methods]], rows) + _provenance(
+        "throughput_cpu_jax010.json", old["machine"], note
+    )
+
+
+def _load(docs, name):
+    path = docs / name
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def measured(docs, name):
+    """A scheme page's measured facts, each from the results file named beside it."""
+    facts = []
+    compare = _load(docs, "compare_heavy_top.json")
+    ladder = [r for r in compare["rows"] if r["method"] == name]
+    if ladder:
+        rungs = ", ".join(
+            f"{r['max_orientation_error_rad']:.1e} at dt = {r['dt']:.3g}"
+            for r in ladder
+            if r["max_orientation_error_rad"] <= 0.1
+        )
+        order = compare["orders"].get(name)
+        fitted = "" if order is None else f"; fitted order {order:.2f}"
+        facts.append(
+            ("heavy-top error, t = 5, float64 (rad)", (rungs or "above 0.1 rad on every rung") + fitted,
+             "compare_heavy_top.json")
+        )  # fmt: skip
+    throughput = _load(docs, "throughput_cpu.json")
+    rate = {(r["dtype"], r["n"]): r for r in throughput["rows"] if r["method"] == name}
+    peer = {(r["dtype"], r["n"]): r for r in throughput["rows"] if r["method"] == "jax_md"}
+    for dtype in ("float64", "float32"):
+        cells = []
+        for (d, n), r in rate.items():
+            if d == dtype:
+                vs = (
+                    f" ({r['particle_steps_per_s'] / peer[d, n]['particle_steps_per_s']:.1f}× jax_md)"
+                    if (d, n) in peer
+                    else ""
+                )
+                cells.append(f"{r['particle_steps_per_s'] * 1e-6:.3g} at N = {_power_of_ten(n)}{vs}")
+        if cells:
+            facts.append((f"M particle-steps/s, heavy top, {dtype}", "; ".join(cells), "throughput_cpu.json"))
+    compile_ = _load(docs, "compile_cpu.json")
+    kinds = {r["kind"]: r for r in compile_["rows"] if r["method"] == name}
+    if kinds:
+        text = ", ".join(f"{kind} {r['total_s']:.1f} s" for kind, r in kinds.items())
+        facts.append(("compile time (200-step heavy top)", text, "compile_cpu.json"))
+    stability = _load(docs, "stability_cpu.json")
+    limits = [r for r in stability["limits"] if r["scheme"] == name]
+    if limits:
+        by = {(r["body"], r["dtype"]): r["limit"] for r in limits}
+        bodies = list(dict.fromkeys(r["body"] for r in limits))
+        cells = []
+        for body in bodies:
+            f64, f32 = _limit(by[body, "float64"]), _limit(by[body, "float32"])
+            cells.append(f"{body}: {f64}" + ("" if f64 == f32 else f" (float32 {f32})"))
+        facts.append(("largest |ω|Δt with error ≤ 1e-3 rad per step", "; ".join(cells), "stability_cpu.json"))
+        for r in (r for r in stability["drift"] if r["scheme"] == name):
+            text = (
+                f"‖q‖ − 1: {_sig(r['norm'], 2)}; energy {_sig(r['energy'], 2)}; |L| {_sig(r['momentum'], 2)}"
+            )
+            facts.append(
+                (f"drift over {r['steps']:.0e} free-body steps, {r['dtype']}", text, "stability_cpu.json")
+            )
+    race = _load(docs, "race_cpu/race_float64.json")
+    wins = [
+        f"{scene} {row['budget']:.0e} ({row['ratio']:.2f}×)"
+        for scene, data in race["scenes"].items()
+        for row in data["table"]
+        if row["ratio"] is not None and row["jaxrot"].split()[0] == name
+    ]
+    if wins:
+        facts.append(
+            ("the race's fastest row (× diffrax's fastest)", "; ".join(wins), "race_cpu/race_float64.json")
+        )
+    rows = [[what, value, f"`docs/{source}`"] for what, value, source in facts]
+    return _table(["measured", "value", "results file"], rows)
+
+
+def _ranges(picks):
+    """Consecutive budgets with the same pick, as ``(largest, smallest, pick, [ratios])``."""
+    out = []
+    for budget, name, ratio in picks:
+        if out and out[-1][2] == name:
+            out[-1][1] = budget
+            out[-1][3].append(ratio)
+        else:
+            out.append([budget, budget, name, [ratio]])
+    return out
+
+
+def _span(values, digits):
+    values = [v for v in values if v is not None]
+    if not values:
+        return "no diffrax row to compare"
+    low, high = min(values), max(values)
+    return (
+        f"{low:.{digits}f}×"
+        if f"{low:.{digits}f}" == f"{high:.{digits}f}"
+        else f"{low:.{digits}f}× to {high:.{digits}f}×"
+    )
+
+
+def front_door_speed(docs):
+    """README's and the home page's speed paragraph: the race's range and, per error range, the scheme
+    to pick on the heavy top and its speed-up over diffrax's fastest, from the results files.
+    `tests/test_results.py` checks that README.md carries exactly this text."""
+    from jaxrot.comparison import budget_table
+
+    low, high, slower = race_ratios(docs)
+    race = _race(docs, "float64")
+    where = "every error budget from 1e-2 to 1e-10 rad on all three scenes" if not slower else "most budgets"
+    lines = [
+        f"In the race (`benchmarks/race.py`: {race['options']['n']} random bodies per scene, float64, "
+        f"{race['machine']['cpus']} CPU cores), jaxrot's fastest row is faster than diffrax's fastest "
+        f"(Tsit5, Dopri5 or Dopri8) at {where}, by {low:.2f}× to {high:.2f}×. Which scheme for which "
+        "budget on the heavy top (`python -m jaxrot compare`, 100 bodies, float64):",
+        "",
+    ]
+    picks = [
+        (
+            budget,
+            mine and f"`{mine['method']}`" + (" (adaptive)" if mine["kind"] == "adaptive" else ""),
+            ratio,
+        )
+        for budget, mine, _, ratio in budget_table(_compare(docs)["rows"])
+    ]
+    for largest, smallest, name, ratios in _ranges(picks):
+        budgets = f"{largest:.0e} rad" if largest == smallest else f"{largest:.0e} to {smallest:.0e} rad"
+        if name is None:
+            lines.append(f"- {budgets}: no jaxrot row")
+        else:
+            lines.append(f"- {budgets}: {name}, {_span(ratios, 1)} faster than diffrax's fastest row")
+    return "\n".join(lines)
+
+
+def gradient_compile_summary(docs):
+    """Which schemes compile their gradient within 2× of diffrax's fastest, the looped derivative
+    stages against the unrolled ones, and the gradients' run times, from ``docs/compile_cpu.json``."""
+    import jaxrot
+
+    rows = json.loads((docs / "compile_cpu.json").read_text())["rows"]
+    grad = {r["method"]: r for r in rows if r["kind"] == "gradient"}
+    diffrax_rows = [r for m, r in grad.items() if m.startswith("diffrax_")]
+    best = min(diffrax_rows, key=lambda r: r["total_s"])
+    fastest_run = min(diffrax_rows, key=lambda r: r["run_ms"])
+    ratio = {m: grad[m]["total_s"] / best["total_s"] for m in jaxrot.SCHEMES if m in grad}
+    within = [f"`{m}`" for m, x in ratio.items() if x <= 2]
+    over = [f"`{m}` ({x:.1f}×)" for m, x in ratio.items() if x > 2]
+    text = (
+        f"Against diffrax's fastest-compiling gradient (`{best['method']}`, {best['total_s']:.1f} s), "
+        + (f"{', '.join(within)} compile within 2×" if within else "no scheme compiles within 2×")
+        + (f"; {', '.join(over)} do not." if over else ": every scheme.")
+    )
+    pairs = [
+        f"`{m}` {grad[m]['total_s']:.1f} s against {grad[m + '+unrolled']['total_s']:.1f} s"
+        for m in jaxrot.SCHEMES
+        if m in grad and m + "+unrolled" in grad
+    ]
+    if pairs:
+        text += (
+            " With the looped derivative stages (the default) against the unrolled ones "
+            "(`loop_derivative_stages=False`, the `+unrolled` rows): " + ", ".join(pairs) + "."
+        )
+    faster = [f"`{m}`" for m in jaxrot.SCHEMES if m in grad and grad[m]["run_ms"] <= fastest_run["run_ms"]]
+    slower = [
+        f"`{m}` {grad[m]['run_ms']:.0f} ms"
+        for m in jaxrot.SCHEMES
+        if m in grad and grad[m]["run_ms"] > fastest_run["run_ms"]
+    ]
+    text += (
+        f"\n\nRunning the gradient (one body, median of 7 runs): against diffrax's fastest "
+        f"(`{fastest_run['method']}`, {fastest_run['run_ms']:.0f} ms), "
+        + (", ".join(faster) + " run as fast or faster" if faster else "no scheme runs as fast")
+        + ("; " + ", ".join(slower) + " take longer." if slower else ".")
+    )
+    return text
+
+
 TABLES = {
     "throughput_table": throughput_table,
     "compile_table": compile_table,
@@ -243,21 +607,34 @@ TABLES = {
     "compare_orders": compare_orders,
     "gpu_throughput_table": gpu_throughput_table,
     "gpu_race_table": gpu_race_table,
+    "race_table_float64": race_table_float64,
+    "race_table_float32": race_table_float32,
+    "race_summary": race_summary,
+    "stability_limits_table": stability_limits_table,
+    "stability_blow_up_table": stability_blow_up_table,
+    "stability_drift_table": stability_drift_table,
+    "identify_speed_table": identify_speed_table,
+    "throughput_peer_ratios": throughput_peer_ratios,
+    "throughput_jax_versions": throughput_jax_versions,
+    "measured": measured,
+    "front_door_speed": front_door_speed,
+    "gradient_compile_summary": gradient_compile_summary,
 }
 
 
 def on_page_markdown(markdown, page, config, files):
-    """Replace each ``{{ name }}`` line naming a table in `TABLES` by that table."""
+    """Replace each ``{{ name }}`` (or ``{{ name argument }}``) line naming a table in `TABLES` by
+    that table."""
     docs = Path(config["docs_dir"])
     lines = markdown.split("\n")
     for i, line in enumerate(lines):
         stripped = line.strip()
         if stripped.startswith("{{") and stripped.endswith("}}"):
-            name = stripped[2:-2].strip()
+            name, *arguments = stripped[2:-2].split()
             if name not in TABLES:
                 raise KeyError(
                     f"{page.file.src_path}: unknown table {{{{ {name} }}}}; known: {sorted(TABLES)}"
                 )
             indent = line[: len(line) - len(line.lstrip())]
-            lines[i] = "\n".join(indent + row for row in TABLES[name](docs).split("\n"))
+            lines[i] = "\n".join(indent + row for row in TABLES[name](docs, *arguments).split("\n"))
     return "\n".join(lines)
