@@ -29,9 +29,12 @@ def main(argv=None) -> int:
         default="float64",
         help="dtype of the runs (default float64)",
     )
-    cmp.add_argument("--coarse-steps", type=int, default=25, help="steps of the coarsest rung (default 25)")
+    cmp.add_argument("--coarse-steps", type=int, default=5, help="steps of the coarsest rung (default 5)")
     cmp.add_argument(
-        "--levels", type=int, default=8, help="rungs of the dt ladder, each halving dt (default 8)"
+        "--levels",
+        type=int,
+        default=8,
+        help="rungs at or below 0.1 rad of each dt ladder, each halving dt (default 8)",
     )
     cmp.add_argument(
         "--schemes", default=None, help="comma-separated subset of the schemes (default: all registered)"

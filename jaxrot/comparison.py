@@ -28,6 +28,7 @@ import statistics
 import subprocess
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import diffrax
 import jax
@@ -68,6 +69,11 @@ ADAPTIVE_SOLVERS = {
 LADDER_FLOOR = 1e-12
 TOLERANCES = {"float64": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11), "float32": (1e-3, 1e-4, 1e-5, 1e-6)}
 ASYMPTOTIC_ERROR = 0.1  # rad; above this the error saturates and says nothing about the order
+# A fixed-step ladder may halve dt this many times more than `levels` while its error is still above
+# ASYMPTOTIC_ERROR (a first-order scheme on a coarse grid), and ends at a rung whose run takes
+# longer than MAX_RUN_S: the coarsest rung is the same for every scheme, the finest is not.
+MAX_SATURATED_RUNGS = 14
+MAX_RUN_S = 2.0
 
 
 def orientation_error(q, q_ref):
@@ -116,13 +122,33 @@ def time_compiled(fn, arg, repeats):
     return out, compile_s, statistics.median(samples)
 
 
+class _Problem(NamedTuple):
+    """What every row of one comparison runs on and is measured against."""
+
+    scene: str
+    dtype: str
+    run_scene: Any  # the scene in the run's dtype
+    ref_scene: Any  # the scene in float64, for the reference
+    ts: jax.Array  # the coarse grid's times, where errors are measured
+    dt_coarse: float
+    coarse_steps: int
+    ref: Any  # the reference trajectory at ``ts``
+    batch: Any  # the timed state: ``particles`` copies of one body, or the scene's bodies
+    particles: int
+    single: bool  # one body copied ``particles`` times (errors from the first copy)
+    inertia: jax.Array  # flattened per-particle inertia, for the adaptive solvers
+    per_particle: bool
+    flat_args: Any
+    args_axes: Any
+
+
 def compare(
     scene="heavy_top",
     *,
     t_end=None,
     particles=100,
     dtype="float64",
-    coarse_steps=25,
+    coarse_steps=5,
     levels=8,
     tolerances=None,
     schemes=None,
@@ -132,9 +158,12 @@ def compare(
 ):
     """Run every scheme and the generic adaptive solvers against the diffrax reference.
 
-    The fixed-step ladder halves ``dt`` from ``t_end / coarse_steps`` ``levels``
-    times; the adaptive rows use each of ``tolerances`` (rtol = atol; default
-    `TOLERANCES` for the dtype). Errors are measured at the coarse grid's times
+    Each fixed-step ladder halves ``dt`` from ``t_end / coarse_steps`` until ``levels`` of its
+    rungs have an error at or below `ASYMPTOTIC_ERROR` (0.1 rad), its error stalls at the
+    reference's floor, or one run takes longer than `MAX_RUN_S`: so every scheme gets rungs
+    from about 0.1 rad down, a high-order one from a coarse step, a first-order one from a fine
+    one. The adaptive rows use each of ``tolerances`` (rtol = atol; default `TOLERANCES` for
+    the dtype). Errors are measured at the coarse grid's times
     against Dopri8 at rtol = atol = 1e-13 in float64, whatever ``dtype`` runs.
     ``schemes`` (names in `SCHEMES`) and ``solvers`` (names in
     `ADAPTIVE_SOLVERS`) select rows; None means all.
@@ -148,6 +177,37 @@ def compare(
     vmapped bodies, per particle-step and per particle over the whole horizon)
     and ``compile_s``.
     """
+    tolerances, schemes, solvers = _check_compare_arguments(
+        scene, dtype, particles, coarse_steps, levels, repeats, tolerances, schemes, solvers
+    )
+    problem = _set_up(scene, dtype, t_end, particles, coarse_steps)
+    jobs = [("fixed", name, k) for name in schemes for k in range(levels + MAX_SATURATED_RUNGS)]
+    jobs += [("adaptive", name, tol) for name in solvers for tol in tolerances]
+    rows = []
+    finished = set()  # schemes whose ladder reached its floor or that refuse the scene's torque
+    for kind, name, level in tqdm(jobs, desc="compare", disable=not progress, leave=False):
+        if name in finished:
+            continue
+        if kind == "adaptive":
+            rows.append(_adaptive_row(problem, name, level, repeats))
+            continue
+        row = _fixed_row(problem, name, level, repeats)
+        if row is None:  # a splitting that cannot keep its order on this torque
+            finished.add(name)
+            continue
+        rows.append(row)
+        ladder = [r["max_orientation_error_rad"] for r in rows if r["method"] == name]
+        counted = sum(e <= ASYMPTOTIC_ERROR for e in ladder)
+        too_long = row["us_per_particle_run"] * problem.particles * 1e-6 > MAX_RUN_S
+        if counted >= levels or ladder[-1] < LADDER_FLOOR or stalled(ladder) or too_long:
+            finished.add(name)
+    return rows
+
+
+def _check_compare_arguments(
+    scene, dtype, particles, coarse_steps, levels, repeats, tolerances, schemes, solvers
+):
+    """`compare`'s arguments checked before anything compiles; the defaults filled in."""
     if scene not in SCENES:
         raise ValueError(f"`scene` must be one of {sorted(SCENES)}; got {scene!r}.")
     if dtype not in DTYPES:
@@ -172,105 +232,112 @@ def compare(
         raise ValueError("`schemes` and `solvers` are both empty: nothing to compare.")
     if dtype == "float32" and any(tol < 1e-6 for tol in tolerances):
         raise ValueError(f"`tolerances` below 1e-6 cannot be met in float32; got {tolerances}.")
-    reference_scene = SCENES[scene](jnp.float64)
-    sc = SCENES[scene](DTYPES[dtype])
-    t_end = reference_scene.t_end if t_end is None else float(t_end)
+    return tolerances, schemes, solvers
+
+
+def _set_up(scene, dtype, t_end, particles, coarse_steps) -> _Problem:
+    """The scene in both dtypes, the coarse grid, the reference on it and the timed batch."""
+    ref_scene = SCENES[scene](jnp.float64)
+    run_scene = SCENES[scene](DTYPES[dtype])
+    t_end = ref_scene.t_end if t_end is None else float(t_end)
     if not t_end > 0:
         raise ValueError(f"`t_end` must be > 0; got {t_end}.")
     dt_coarse = t_end / coarse_steps
     ts = jnp.arange(coarse_steps + 1, dtype=jnp.float64) * dt_coarse
-    rs = reference_scene
+    rs = ref_scene
     ref = reference_rollout(
         rs.state, rs.inertia, ts, torque=rs.torque, args=rs.args, rtol=REFERENCE_TOL, atol=REFERENCE_TOL
     )
-    single = sc.state.q.ndim == 1
+    single = run_scene.state.q.ndim == 1
     if single:  # one body: time it over `particles` vmapped copies
-        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (particles, *x.shape)), sc.state)
+        batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (particles, *x.shape)), run_scene.state)
     else:  # the scene's own bodies (they may interact)
-        batch, particles = sc.state, sc.n_bodies
-    _, inertia, per_particle = check_bodies(batch, sc.inertia)
+        batch, particles = run_scene.state, run_scene.n_bodies
+    _, inertia, per_particle = check_bodies(batch, run_scene.inertia)
     batch_shape = batch.q.shape[:-1]
     _, inertia = flatten_particles(batch, inertia, per_particle)
-    flat_args, args_axes = split_per_body(sc.args, () if single else batch_shape)
+    flat_args, args_axes = split_per_body(run_scene.args, () if single else batch_shape)
+    return _Problem(
+        scene, dtype, run_scene, ref_scene, ts, dt_coarse, coarse_steps, ref, batch, particles, single,
+        inertia, per_particle, flat_args, args_axes,
+    )  # fmt: skip
 
-    def accuracy(q, omega):
-        if single:
-            q, omega = q[:, 0], omega[:, 0]
-        omega_gap = jnp.asarray(omega[-1], jnp.float64) - ref.omega[-1]
-        return {
-            "max_orientation_error_rad": orientation_error(q, ref.q),
-            "final_omega_error": float(jnp.max(jnp.linalg.norm(omega_gap, axis=-1))),
-            "rel_energy_drift": relative_energy_drift(rs, q, omega),
-        }
 
-    common = {"scene": scene, "dtype": dtype, "particles": particles}
-    jobs = [("fixed", name, k) for name in schemes for k in range(levels)]
-    jobs += [("adaptive", name, tol) for name in solvers for tol in tolerances]
-    rows = []
-    finished = set()  # schemes whose ladder reached its floor or that refuse the scene's torque
-    for kind, name, level in tqdm(jobs, desc="compare", disable=not progress, leave=False):
-        if name in finished:
-            continue
-        if kind == "fixed":
-            scheme = SCHEMES[name]
-            factor = 2**level
-            dt, n_steps = dt_coarse / factor, coarse_steps * factor
+def _accuracy(problem: _Problem, q, omega) -> dict:
+    """A row's errors against the reference at the coarse grid's times."""
+    if problem.single:
+        q, omega = q[:, 0], omega[:, 0]
+    omega_gap = jnp.asarray(omega[-1], jnp.float64) - problem.ref.omega[-1]
+    return {
+        "max_orientation_error_rad": orientation_error(q, problem.ref.q),
+        "final_omega_error": float(jnp.max(jnp.linalg.norm(omega_gap, axis=-1))),
+        "rel_energy_drift": relative_energy_drift(problem.ref_scene, q, omega),
+    }
 
-            def run(state, scheme=scheme, dt=dt, n_steps=n_steps, factor=factor):
-                return rollout(
-                    scheme, state, sc.inertia, dt, n_steps, torque=sc.torque, args=sc.args, save_every=factor
-                )
 
-            try:
-                traj, compile_s, seconds = time_compiled(run, batch, repeats)
-            except ValueError as err:
-                if "depends on the angular velocity" not in str(err):
-                    raise
-                finished.add(name)  # a splitting that cannot keep its order on this torque
-                continue
-            per_step, at_init = scheme.torque_evals_per_step, scheme.torque_evals_at_init
-            evals = 0 if sc.torque is None else per_step * n_steps + at_init
-            row = {"method": name, "kind": kind, "order": scheme.order, "dt": dt, "tol": None}
-        else:
-            solver, order, calls_per_step = ADAPTIVE_SOLVERS[name]
+def _row(problem: _Problem, method, traj, n_steps, evals, seconds, compile_s) -> dict:
+    """The fields every row shares: its setting is merged in by the caller."""
+    return {
+        "scene": problem.scene,
+        "dtype": problem.dtype,
+        "particles": problem.particles,
+        **method,
+        "n_steps": n_steps,
+        **_accuracy(problem, traj.q, traj.omega),
+        "torque_evals": evals,
+        "us_per_particle_step": seconds / (problem.particles * max(n_steps, 1)) * 1e6,
+        "us_per_particle_run": seconds / problem.particles * 1e6,
+        "compile_s": compile_s,
+    }
 
-            def run(state, solver=solver, tol=level):
-                q, omega = state.q.reshape(-1, 4), state.omega.reshape(-1, 3)
-                traj, result, steps = adaptive_solve(
-                    solver(), q, omega, inertia, per_particle, ts.astype(q.dtype),
-                    sc.torque, flat_args, tol, tol, 1_000_000, args_axes,
-                )  # fmt: skip
-                shape = (len(ts), *state.q.shape[:-1])
-                return (
-                    traj._replace(q=traj.q.reshape(*shape, 4), omega=traj.omega.reshape(*shape, 3)),
-                    result,
-                    steps,
-                )
 
-            (traj, result, steps), compile_s, seconds = time_compiled(run, batch, repeats)
-            if np.any(np.asarray(result != diffrax.RESULTS.successful)):
-                raise RuntimeError(f"compare: {name} failed at tol={level:g}; use looser tolerances.")
-            mean_steps = float(np.mean(np.asarray(steps)))  # bodies of a cloud take different steps
-            n_steps = int(round(mean_steps))
-            evals = int(round(calls_per_step * mean_steps)) + 1
-            row = {"method": name, "kind": kind, "order": order, "dt": None, "tol": level}
-        rows.append(
-            {
-                **common,
-                **row,
-                "n_steps": n_steps,
-                **accuracy(traj.q, traj.omega),
-                "torque_evals": evals,
-                "us_per_particle_step": seconds / (particles * max(n_steps, 1)) * 1e6,
-                "us_per_particle_run": seconds / particles * 1e6,
-                "compile_s": compile_s,
-            }
+def _fixed_row(problem: _Problem, name, level, repeats):
+    """Scheme ``name`` at ``dt_coarse / 2**level``, or None where it refuses the scene's torque."""
+    scheme, sc = SCHEMES[name], problem.run_scene
+    factor = 2**level
+    dt, n_steps = problem.dt_coarse / factor, problem.coarse_steps * factor
+
+    def run(state):
+        return rollout(
+            scheme, state, sc.inertia, dt, n_steps, torque=sc.torque, args=sc.args, save_every=factor
         )
-        if kind == "fixed":
-            ladder = [r["max_orientation_error_rad"] for r in rows if r["method"] == name]
-            if ladder[-1] < LADDER_FLOOR or stalled(ladder):
-                finished.add(name)
-    return rows
+
+    try:
+        traj, compile_s, seconds = time_compiled(run, problem.batch, repeats)
+    except ValueError as err:
+        if "depends on the angular velocity" not in str(err):
+            raise
+        return None
+    evals = 0 if sc.torque is None else scheme.torque_evals_per_step * n_steps + scheme.torque_evals_at_init
+    method = {"method": name, "kind": "fixed", "order": scheme.order, "dt": dt, "tol": None}
+    return _row(problem, method, traj, n_steps, evals, seconds, compile_s)
+
+
+def _adaptive_row(problem: _Problem, name, tol, repeats):
+    """diffrax solver ``name`` with adaptive steps at rtol = atol = ``tol``."""
+    solver, order, calls_per_step = ADAPTIVE_SOLVERS[name]
+    p = problem
+
+    def run(state):
+        q, omega = state.q.reshape(-1, 4), state.omega.reshape(-1, 3)
+        traj, result, steps = adaptive_solve(
+            solver(), q, omega, p.inertia, p.per_particle, p.ts.astype(q.dtype),
+            p.run_scene.torque, p.flat_args, tol, tol, 1_000_000, p.args_axes,
+        )  # fmt: skip
+        shape = (len(p.ts), *state.q.shape[:-1])
+        return (
+            traj._replace(q=traj.q.reshape(*shape, 4), omega=traj.omega.reshape(*shape, 3)),
+            result,
+            steps,
+        )
+
+    (traj, result, steps), compile_s, seconds = time_compiled(run, p.batch, repeats)
+    if np.any(np.asarray(result != diffrax.RESULTS.successful)):
+        raise RuntimeError(f"compare: {name} failed at tol={tol:g}; use looser tolerances.")
+    mean_steps = float(np.mean(np.asarray(steps)))  # bodies of a cloud take different steps
+    evals = int(round(calls_per_step * mean_steps)) + 1
+    method = {"method": name, "kind": "adaptive", "order": order, "dt": None, "tol": tol}
+    return _row(p, method, traj, int(round(mean_steps)), evals, seconds, compile_s)
 
 
 def stalled(errors) -> bool:
@@ -337,6 +404,43 @@ def format_recommendation(rows) -> str:
     return "fastest within error budget [rad] (µs per particle over the horizon): " + "; ".join(parts)
 
 
+def budget_table(rows, budgets=None) -> list:
+    """Per error budget, each side's fastest row and how many times faster jaxrot's is.
+
+    Returns ``[(budget, fastest jaxrot row or None, fastest diffrax row or None, ratio or None)]``
+    with ``ratio`` = diffrax's wall time / jaxrot's (> 1: jaxrot is faster), at the budgets of
+    `recommend` over all rows unless ``budgets`` are given.
+    """
+    budgets = [b for b, _ in recommend(rows, budgets)]
+    ours = recommend([r for r in rows if r["method"] not in ADAPTIVE_SOLVERS], budgets)
+    theirs = recommend([r for r in rows if r["method"] in ADAPTIVE_SOLVERS], budgets)
+    table = []
+    for (budget, mine), (_, best) in zip(ours, theirs, strict=True):
+        ratio = best["us_per_particle_run"] / mine["us_per_particle_run"] if mine and best else None
+        table.append((budget, mine, best, ratio))
+    return table
+
+
+def format_budget_table(rows) -> str:
+    """`budget_table` as text: one line per budget, the row to pick and its speed-up over diffrax."""
+
+    def pick(row):
+        return (
+            "none"
+            if row is None
+            else f"{row['method']} {setting_label(row)} ({row['us_per_particle_run']:.3g} µs)"
+        )
+
+    head = (
+        f"{'budget [rad]':>12}  {'fastest jaxrot row':<40} {'fastest diffrax row':<40} {'diffrax/jaxrot':>14}"
+    )
+    lines = [head, "-" * len(head)]
+    for budget, mine, best, ratio in budget_table(rows):
+        speed = "—" if ratio is None else f"{ratio:.1f}×"
+        lines.append(f"{budget:>12.0e}  {pick(mine):<40} {pick(best):<40} {speed:>14}")
+    return "\n".join(lines)
+
+
 def _maybe(x):
     return "—" if x is None else f"{x:.2e}"
 
@@ -362,6 +466,8 @@ def format_table(rows) -> str:
         )
         lines.append(f"measured order ({name}): {fitted} (nominal {SCHEMES[name].order})")
     lines.append(format_recommendation(rows))
+    if any(r["method"] in ADAPTIVE_SOLVERS for r in rows) and any(r["method"] in SCHEMES for r in rows):
+        lines += ["", format_budget_table(rows)]
     return "\n".join(lines)
 
 

@@ -17,8 +17,10 @@ from jaxrot import comparison, quaternion as quat
 from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot.comparison import (
     ADAPTIVE_SOLVERS,
+    budget_table,
     compare,
     fit_order,
+    format_budget_table,
     format_recommendation,
     measured_orders,
     recommend,
@@ -223,6 +225,29 @@ def test_recommendation_is_the_fastest_row_within_each_budget():
     assert picks[1e-3]["method"] == "b"
     assert picks[1e-4] is None
     assert "≤1e-04: none" in format_recommendation(rows)
+
+
+def test_budget_table_pits_each_sides_fastest_row_against_the_other():
+    rows = [
+        {"method": "zhao", "kind": "fixed", "dt": 0.1, "max_orientation_error_rad": 5e-2,
+         "us_per_particle_run": 1.0},
+        {"method": "rkmk4", "kind": "fixed", "dt": 0.1, "max_orientation_error_rad": 5e-4,
+         "us_per_particle_run": 3.0},
+        {"method": "diffrax_tsit5", "kind": "adaptive", "tol": 1e-3, "max_orientation_error_rad": 4e-2,
+         "us_per_particle_run": 4.0},
+        {"method": "diffrax_tsit5", "kind": "adaptive", "tol": 1e-5, "max_orientation_error_rad": 4e-5,
+         "us_per_particle_run": 6.0},
+    ]  # fmt: skip
+    table = budget_table(rows)
+    assert [b for b, *_ in table] == [1e-1, 1e-2, 1e-3, 1e-4]
+    by_budget = {
+        b: (mine and mine["method"], best and best["us_per_particle_run"], r) for b, mine, best, r in table
+    }
+    assert by_budget[1e-1] == ("zhao", 4.0, 4.0)  # zhao 1 µs against Tsit5's 4 µs
+    assert by_budget[1e-2] == ("rkmk4", 6.0, 2.0)
+    assert by_budget[1e-4] == (None, 6.0, None)  # only diffrax meets it: no ratio
+    text = format_budget_table(rows)
+    assert "4.0×" in text and "2.0×" in text and text.count("\n") == 1 + len(table)
 
 
 def test_a_row_that_blew_up_meets_no_budget():
