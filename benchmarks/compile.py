@@ -15,7 +15,9 @@ HLO (what XLA had to compile), ``run_ms`` the median of 7 runs of the compiled p
 is compiled (one body: the fitting user's case). The table prints the totals against diffrax's
 fastest-compiling solver of the same kind (forward or gradient), and the gradient's run time
 against diffrax's fastest-running one, measured in the same run. ``name+loop`` rows are the
-Lie-group Runge–Kutta schemes with ``loop_stages=True``.
+Lie-group Runge–Kutta schemes with ``loop_stages=True`` (stages in a loop everywhere),
+``name+unrolled`` rows with ``loop_derivative_stages=False`` (the unrolled stages differentiated:
+the default until the looped derivative rule).
 
     python benchmarks/compile.py                       # every scheme, writes docs/compile_cpu.json
     python benchmarks/compile.py --methods zhao,rkmk_dopri8,diffrax_dopri8 --out /tmp/c.json
@@ -34,8 +36,11 @@ STEPS, SAVE_EVERY = 200, 10
 DIFFRAX = ("diffrax_tsit5", "diffrax_dopri5", "diffrax_dopri8")
 KINDS = ("forward", "gradient")
 RUNS = 7  # timed runs of each compiled program after the first; the median is reported
-# The Lie-group Runge–Kutta schemes again with ``loop_stages=True`` (their stages in one loop).
+# The Lie-group Runge–Kutta schemes again with ``loop_stages=True`` (their stages in one loop), and
+# with ``loop_derivative_stages=False`` (unrolled stages differentiated: the default before it).
 LOOPED = ("rkmk4+loop", "rkmk_dopri5+loop", "rkmk_dopri8+loop")
+UNROLLED = ("rkmk4+unrolled", "rkmk_dopri5+unrolled", "rkmk_dopri8+unrolled")
+VARIANTS = {"loop": {"loop_stages": True}, "unrolled": {"loop_derivative_stages": False}}
 
 
 def _programs(method):
@@ -62,7 +67,7 @@ def _programs(method):
             return sol.ys.q
     else:
         name, _, variant = method.partition("+")
-        scheme = type(jaxrot.SCHEMES[name])(loop_stages=True) if variant == "loop" else name
+        scheme = type(jaxrot.SCHEMES[name])(**VARIANTS[variant]) if variant else name
 
         def saved_q(inertia, args):
             traj = jaxrot.rollout(
@@ -166,7 +171,7 @@ def main():
     import jaxrot
     from jaxrot.comparison import machine_info
 
-    methods = opts.methods.split(",") if opts.methods else [*jaxrot.SCHEMES, *LOOPED, *DIFFRAX]
+    methods = opts.methods.split(",") if opts.methods else [*jaxrot.SCHEMES, *LOOPED, *UNROLLED, *DIFFRAX]
     jobs = [(m, k) for m in methods for k in opts.kinds.split(",")]
     rows = []
     try:

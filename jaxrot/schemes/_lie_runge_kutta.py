@@ -191,6 +191,7 @@ class AbstractLieRungeKutta(AbstractScheme):
 
     chart: str = eqx.field(default="exp", static=True)
     loop_stages: bool = eqx.field(default=False, static=True)
+    loop_derivative_stages: bool = eqx.field(default=True, static=True)
     tableau: eqx.AbstractClassVar[diffrax.ButcherTableau]
     has_error_estimate: ClassVar[bool] = False
     # The continuous extension of the tableau (a diffrax ``interpolation_cls``), used by
@@ -253,6 +254,18 @@ class AbstractLieRungeKutta(AbstractScheme):
         first-same-as-last tableau, reused by the adaptive solver."""
         if self.loop_stages:
             return self._looped_stages(carry, t, dt, inertia, torque, args, n_stages, first_torque)
+        if not self.loop_derivative_stages:
+            return self._unrolled_stages(carry, t, dt, inertia, torque, args, n_stages, first_torque)
+        consts = ()
+        if torque is not None:
+            (q0, omega0), _ = carry
+            torque, consts = jax.closure_convert(torque, t, q0, omega0, args)
+        return _stages_with_looped_derivatives(
+            carry, t, dt, inertia, args, first_torque, consts, scheme=self, torque=torque, n_stages=n_stages
+        )
+
+    def _unrolled_stages(self, carry, t, dt, inertia, torque, args, n_stages, first_torque):
+        """`stages`, one stage after another in the program (each behind a `stage` barrier)."""
         inertia = body_inertia(inertia)
         (q0, omega0), momentum0 = carry
         c = np.concatenate([[0.0], self.tableau.c])
@@ -329,6 +342,40 @@ class AbstractLieRungeKutta(AbstractScheme):
         impulse = None if not taus else _combination(dt, weights, taus)
         momentum1 = momentum0 if impulse is None else momentum0 + impulse
         return LieRungeKuttaCarry(RotState(q1, _omega(q1, momentum1, body_inertia(inertia))), momentum1)
+
+
+def _bind(torque, consts):
+    """A closure-converted torque with its hoisted constants put back."""
+    return None if torque is None else (lambda t, q, omega, args: torque(t, q, omega, args, *consts))
+
+
+@eqx.filter_custom_jvp
+def _stages_with_looped_derivatives(
+    carry, t, dt, inertia, args, first_torque, consts, *, scheme, torque, n_stages
+):
+    """The unrolled stages, differentiated as the looped ones (``loop_derivative_stages``)."""
+    return scheme._unrolled_stages(carry, t, dt, inertia, _bind(torque, consts), args, n_stages, first_torque)
+
+
+@_stages_with_looped_derivatives.def_jvp
+def _stages_jvp(primals, tangents, *, scheme, torque, n_stages):
+    def looped(carry, t, dt, inertia, args, first_torque, consts):
+        return scheme._looped_stages(
+            carry, t, dt, inertia, _bind(torque, consts), args, n_stages, first_torque
+        )
+
+    # Only the inputs with a tangent enter the JVP: the others (symbolic zeros, integers) are held.
+    leaves, treedef = jax.tree_util.tree_flatten(primals)
+    tangent_leaves = treedef.flatten_up_to(tangents)
+    live = [i for i, tangent in enumerate(tangent_leaves) if tangent is not None]
+
+    def of_live(*values):
+        full = list(leaves)
+        for i, value in zip(live, values, strict=True):
+            full[i] = value
+        return looped(*jax.tree_util.tree_unflatten(treedef, full))
+
+    return jax.jvp(of_live, [leaves[i] for i in live], [tangent_leaves[i] for i in live])
 
 
 def _omega(q, momentum, inertia):
