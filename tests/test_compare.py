@@ -239,13 +239,14 @@ def test_budget_table_pits_each_sides_fastest_row_against_the_other():
          "us_per_particle_run": 6.0},
     ]  # fmt: skip
     table = budget_table(rows)
-    assert [b for b, *_ in table] == [1e-1, 1e-2, 1e-3, 1e-4]
+    assert [b for b, *_ in table] == [1e-1, 1e-2, 1e-3, 1e-4, 1e-5]  # down to the smallest error's decade
     by_budget = {
         b: (mine and mine["method"], best and best["us_per_particle_run"], r) for b, mine, best, r in table
     }
     assert by_budget[1e-1] == ("zhao", 4.0, 4.0)  # zhao 1 µs against Tsit5's 4 µs
     assert by_budget[1e-2] == ("rkmk4", 6.0, 2.0)
     assert by_budget[1e-4] == (None, 6.0, None)  # only diffrax meets it: no ratio
+    assert by_budget[1e-5] == (None, None, None)
     text = format_budget_table(rows)
     assert "4.0×" in text and "2.0×" in text and text.count("\n") == 1 + len(table)
 
