@@ -501,7 +501,7 @@ def _ranges(picks):
     """Consecutive budgets with the same pick, as ``(largest, smallest, pick, [ratios])``."""
     out = []
     for budget, name, ratio in picks:
-        if out and out[-1][2] == name:
+        if out and out[-1][2] == name and (out[-1][3][-1] is None) == (ratio is None):
             out[-1][1] = budget
             out[-1][3].append(ratio)
         else:
@@ -543,12 +543,15 @@ def front_door_speed(docs):
             mine and f"`{mine['method']}`" + (" (adaptive)" if mine["kind"] == "adaptive" else ""),
             ratio,
         )
-        for budget, mine, _, ratio in budget_table(_compare(docs)["rows"])
+        for budget, mine, theirs, ratio in budget_table(_compare(docs)["rows"])
+        if mine or theirs
     ]
     for largest, smallest, name, ratios in _ranges(picks):
         budgets = f"{largest:.0e} rad" if largest == smallest else f"{largest:.0e} to {smallest:.0e} rad"
         if name is None:
-            lines.append(f"- {budgets}: no jaxrot row")
+            lines.append(f"- {budgets}: no jaxrot row (diffrax has one)")
+        elif ratios[0] is None:
+            lines.append(f"- {budgets}: {name} (diffrax has no row this accurate)")
         else:
             lines.append(f"- {budgets}: {name}, {_span(ratios, 1)} faster than diffrax's fastest row")
     return "\n".join(lines)
