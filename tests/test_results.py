@@ -22,6 +22,7 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 RESULTS = {
     "compile_cpu.json": ("method", "python benchmarks/regenerate.py --only compile"),
     "throughput_cpu.json": ("method", "python benchmarks/regenerate.py --only throughput"),
+    "throughput_cpu_jax010.json": ("method", "python benchmarks/regenerate.py --only throughput_jax010"),
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),
