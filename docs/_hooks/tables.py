@@ -573,7 +573,7 @@ def gradient_compile_summary(docs):
     text = (
         f"Against diffrax's fastest-compiling gradient (`{best['method']}`, {best['total_s']:.1f} s), "
         + (f"{', '.join(within)} compile within 2×" if within else "no scheme compiles within 2×")
-        + (f"; {', '.join(over)} do not." if over else ": every scheme.")
+        + (f"; {', '.join(over)} {'does' if len(over) == 1 else 'do'} not." if over else ": every scheme.")
     )
     pairs = [
         f"`{m}` {grad[m]['total_s']:.1f} s against {grad[m + '+unrolled']['total_s']:.1f} s"
