@@ -269,15 +269,14 @@ class AbstractLieRungeKutta(AbstractScheme):
         consts = ()
         if torque is not None:
             (q0, omega0), _ = carry
-            # Only array leaves of `args` can be example arguments; the rest is held as they are.
-            dynamic, static = eqx.partition(args, eqx.is_array)
-            converted, consts = jax.closure_convert(
-                lambda t, q, omega, dynamic: torque(t, q, omega, eqx.combine(dynamic, static)),
-                t, q0, omega0, dynamic,
+            # Only the array leaves of `args` can be example arguments: the converted torque takes
+            # them as its `args` and holds the rest, so only they go on to the stages.
+            args, static = eqx.partition(args, eqx.is_array)
+            user_torque = torque
+            torque, consts = jax.closure_convert(
+                lambda t, q, omega, dynamic: user_torque(t, q, omega, eqx.combine(dynamic, static)),
+                t, q0, omega0, args,
             )  # fmt: skip
-            torque = lambda t, q, omega, args, *consts: converted(  # noqa: E731
-                t, q, omega, eqx.filter(args, eqx.is_array), *consts
-            )
         return _stages_with_looped_derivatives(
             carry, t, dt, inertia, args, first_torque, consts, scheme=self, torque=torque, n_stages=n_stages
         )
