@@ -10,6 +10,11 @@ import json
 from pathlib import Path
 
 
+def _read(docs, name):
+    """The results file ``docs/name``, parsed."""
+    return json.loads((docs / name).read_text())
+
+
 def _table(header, rows):
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
@@ -27,7 +32,7 @@ def _power_of_ten(n):
 
 
 def _pivot(docs, field, scale, digits):
-    data = json.loads((docs / "throughput_cpu.json").read_text())
+    data = _read(docs, "throughput_cpu.json")
     methods = list(dict.fromkeys(row["method"] for row in data["rows"]))
     cases = list(dict.fromkeys((row["dtype"], row["n"]) for row in data["rows"]))
     values = {(row["dtype"], row["n"], row["method"]): row[field] for row in data["rows"]}
@@ -52,7 +57,7 @@ def compile_table(docs):
 
 
 def memory_table(docs):
-    data = json.loads((docs / "memory_cpu.json").read_text())
+    data = _read(docs, "memory_cpu.json")
     header = [
         "scheme",
         "steps",
@@ -88,7 +93,7 @@ def memory_table(docs):
 
 def _compare(docs):
     """``docs/compare_heavy_top.json``, written by ``python -m jaxrot compare`` (`jaxrot.comparison`)."""
-    return json.loads((docs / "compare_heavy_top.json").read_text())
+    return _read(docs, "compare_heavy_top.json")
 
 
 def _setting(r):
@@ -215,7 +220,7 @@ def gpu_throughput_table(docs):
 
 def gpu_race_table(docs):
     """The heavy-top race on the H100, from docs/gpu_h100/race_heavy_top_float64.json."""
-    data = json.loads((docs / "gpu_h100" / "race_heavy_top_float64.json").read_text())
+    data = _read(docs, "gpu_h100/race_heavy_top_float64.json")
     lines = [
         "| budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
         "|---|---|---|---|",
@@ -237,13 +242,13 @@ def gradient_compile_table(docs):
     )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    data = json.loads((docs / "compile_cpu.json").read_text())
+    data = _read(docs, "compile_cpu.json")
     note = _provenance("compile_cpu.json", data["machine"], f" ({data['problem']})")
     return module.table(data["rows"]) + note
 
 
 def _race(docs, dtype):
-    return json.loads((docs / "race_cpu" / f"race_{dtype}.json").read_text())
+    return _read(docs, f"race_cpu/race_{dtype}.json")
 
 
 def _race_cell(row):
@@ -306,7 +311,7 @@ def race_summary(docs):
 
 
 def _stability(docs):
-    return json.loads((docs / "stability_cpu.json").read_text())
+    return _read(docs, "stability_cpu.json")
 
 
 def _limit(x):
@@ -354,7 +359,7 @@ def stability_drift_table(docs):
 
 def identify_speed_table(docs):
     """`benchmarks/identify_speed.py`'s fits: jaxrot.identify and the diffrax + optimistix rows."""
-    data = json.loads((docs / "identify_speed_cpu.json").read_text())
+    data = _read(docs, "identify_speed_cpu.json")
     base = data["rows"][0]["compiled_s"]
     header = ["fit", "first call [s]", "compiled [s]", "loss", "max Δ vs jaxrot [se]", "model error [rad]"]
     header.append("time / jaxrot's")
@@ -385,7 +390,7 @@ def identify_speed_table(docs):
 
 def throughput_peer_ratios(docs):
     """One sentence per dtype: each scheme's throughput over jax_md's NO_SQUISH at the largest N."""
-    data = json.loads((docs / "throughput_cpu.json").read_text())
+    data = _read(docs, "throughput_cpu.json")
     rate = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in data["rows"]}
     if not any(m == "jax_md" for _, _, m in rate):
         return "*jax_md was not installed for this run: no peer column.*"
@@ -403,8 +408,8 @@ def throughput_peer_ratios(docs):
 
 def throughput_jax_versions(docs):
     """Float64 throughput with jax 0.10.2 (M/s) and, in brackets, its ratio to the newest jax's run."""
-    old = json.loads((docs / "throughput_cpu_jax010.json").read_text())
-    new = json.loads((docs / "throughput_cpu.json").read_text())
+    old = _read(docs, "throughput_cpu_jax010.json")
+    new = _read(docs, "throughput_cpu.json")
     rate_new = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in new["rows"]}
     methods = list(dict.fromkeys(r["method"] for r in old["rows"]))
     rate_old = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in old["rows"]}
@@ -423,15 +428,10 @@ def throughput_jax_versions(docs):
     )
 
 
-def _load(docs, name):
-    path = docs / name
-    return json.loads(path.read_text()) if path.exists() else None
-
-
 def measured(docs, name):
     """A scheme page's measured facts, each from the results file named beside it."""
     facts = []
-    compare = _load(docs, "compare_heavy_top.json")
+    compare = _compare(docs)
     ladder = [r for r in compare["rows"] if r["method"] == name]
     if ladder:
         rungs = ", ".join(
@@ -445,7 +445,7 @@ def measured(docs, name):
             ("heavy-top error, t = 5, float64 (rad)", (rungs or "above 0.1 rad on every rung") + fitted,
              "compare_heavy_top.json")
         )  # fmt: skip
-    throughput = _load(docs, "throughput_cpu.json")
+    throughput = _read(docs, "throughput_cpu.json")
     rate = {(r["dtype"], r["n"]): r for r in throughput["rows"] if r["method"] == name}
     peer = {(r["dtype"], r["n"]): r for r in throughput["rows"] if r["method"] == "jax_md"}
     for dtype in ("float64", "float32"):
@@ -460,12 +460,12 @@ def measured(docs, name):
                 cells.append(f"{r['particle_steps_per_s'] * 1e-6:.3g} at N = {_power_of_ten(n)}{vs}")
         if cells:
             facts.append((f"M particle-steps/s, heavy top, {dtype}", "; ".join(cells), "throughput_cpu.json"))
-    compile_ = _load(docs, "compile_cpu.json")
+    compile_ = _read(docs, "compile_cpu.json")
     kinds = {r["kind"]: r for r in compile_["rows"] if r["method"] == name}
     if kinds:
         text = ", ".join(f"{kind} {r['total_s']:.1f} s" for kind, r in kinds.items())
         facts.append(("compile time (200-step heavy top)", text, "compile_cpu.json"))
-    stability = _load(docs, "stability_cpu.json")
+    stability = _stability(docs)
     limits = [r for r in stability["limits"] if r["scheme"] == name]
     if limits:
         by = {(r["body"], r["dtype"]): r["limit"] for r in limits}
@@ -482,7 +482,7 @@ def measured(docs, name):
             facts.append(
                 (f"drift over {r['steps']:.0e} free-body steps, {r['dtype']}", text, "stability_cpu.json")
             )
-    race = _load(docs, "race_cpu/race_float64.json")
+    race = _race(docs, "float64")
     wins = [
         f"{scene} {row['budget']:.0e} ({row['ratio']:.2f}×)"
         for scene, data in race["scenes"].items()
@@ -562,7 +562,7 @@ def gradient_compile_summary(docs):
     stages against the unrolled ones, and the gradients' run times, from ``docs/compile_cpu.json``."""
     import jaxrot
 
-    rows = json.loads((docs / "compile_cpu.json").read_text())["rows"]
+    rows = _read(docs, "compile_cpu.json")["rows"]
     grad = {r["method"]: r for r in rows if r["kind"] == "gradient"}
     diffrax_rows = [r for m, r in grad.items() if m.startswith("diffrax_")]
     best = min(diffrax_rows, key=lambda r: r["total_s"])
