@@ -38,9 +38,8 @@ KINDS = ("forward", "gradient")
 RUNS = 7  # timed runs of each compiled program after the first; the median is reported
 # The Lie-group Runge–Kutta schemes again with ``loop_stages=True`` (their stages in one loop), and
 # with ``loop_derivative_stages=False`` (unrolled stages differentiated: the default before it).
-LOOPED = ("rkmk4+loop", "rkmk_dopri5+loop", "rkmk_dopri8+loop")
-UNROLLED = ("rkmk4+unrolled", "rkmk_dopri5+unrolled", "rkmk_dopri8+unrolled")
 VARIANTS = {"loop": {"loop_stages": True}, "unrolled": {"loop_derivative_stages": False}}
+VARIANT_ROWS = tuple(f"{name}+{v}" for v in VARIANTS for name in ("rkmk4", "rkmk_dopri5", "rkmk_dopri8"))
 
 
 def _programs(method):
@@ -171,7 +170,7 @@ def main():
     import jaxrot
     from jaxrot.comparison import machine_info
 
-    methods = opts.methods.split(",") if opts.methods else [*jaxrot.SCHEMES, *LOOPED, *UNROLLED, *DIFFRAX]
+    methods = opts.methods.split(",") if opts.methods else [*jaxrot.SCHEMES, *VARIANT_ROWS, *DIFFRAX]
     jobs = [(m, k) for m in methods for k in opts.kinds.split(",")]
     rows = []
     try:

@@ -37,6 +37,8 @@ class Job(NamedTuple):
     argv: tuple[str, ...]  # after the interpreter
     minutes: float  # on this project's 2-core CPU
     long: bool = False
+    # (file in the job's scratch folder ``{tmp}``, file under docs/) copied once the job has run
+    copies: tuple[tuple[str, str], ...] = ()
 
 
 JOBS = {
@@ -45,6 +47,7 @@ JOBS = {
         ("-m", "jaxrot", "compare", "--out", "{tmp}"),
         4,
         True,
+        (("compare.json", "compare_heavy_top.json"), ("compare.png", "compare_heavy_top.png")),
     ),
     "race64": Job(
         ("race_cpu/race_float64.json",),
@@ -116,9 +119,8 @@ def run_job(name, job, python):
         print(f"== {name}: {' '.join(argv)}", flush=True)
         start = time.perf_counter()
         subprocess.run(argv, cwd=ROOT, check=True)
-        if name == "compare":
-            shutil.copy(Path(tmp) / "compare.json", DOCS / "compare_heavy_top.json")
-            shutil.copy(Path(tmp) / "compare.png", DOCS / "compare_heavy_top.png")
+        for source, target in job.copies:
+            shutil.copy(Path(tmp) / source, DOCS / target)
         print(
             f"== {name}: {(time.perf_counter() - start) / 60:.1f} min; wrote {', '.join(job.files)}",
             flush=True,
