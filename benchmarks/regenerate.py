@@ -91,14 +91,32 @@ JOBS = {
         (
             "benchmarks/throughput.py",
             "--n",
-            "1000,10000,100000",
+            "1000,10000,100000,1000000",
             "--dtype",
-            "float64",
+            "float32,float64",
             "--no-peer",
             "--json",
             "docs/throughput_cpu_jax010.json",
         ),  # fmt: skip
-        5,
+        9,
+    ),
+    # The same with XLA's default options instead of jaxrot.compiler_options(): the YNN trap.
+    "throughput_jax010_xla_defaults": Job(
+        ("throughput_cpu_jax010_xla_defaults.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000",
+            "--dtype",
+            "float64",
+            "--schemes",
+            "zhao,rozmanov,no_squish",
+            "--no-peer",
+            "--xla-defaults",
+            "--json",
+            "docs/throughput_cpu_jax010_xla_defaults.json",
+        ),  # fmt: skip
+        1.5,
     ),
     "memory": Job(("memory_cpu.json",), ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"), 5),
     "stability": Job(

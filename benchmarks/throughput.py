@@ -111,7 +111,7 @@ def machine():
     return info
 
 
-def measure(ns, dtypes, schemes, work, repeats, peer):
+def measure(ns, dtypes, schemes, work, repeats, peer, xla_defaults=False):
     rows = []
     jobs = [(dtype, n) for dtype in dtypes for n in ns]
     for dtype_name, n in tqdm(jobs, desc="throughput"):
@@ -123,7 +123,10 @@ def measure(ns, dtypes, schemes, work, repeats, peer):
             runs["jax_md"] = jax_md_run(scene, n_steps)
         finals = {}
         for name, run in runs.items():
-            final_q, compile_s, seconds = time_compiled(run, state, repeats)
+            # jaxrot's programs compile with its options, as `jaxrot.rollout` does at top level;
+            # jax_md's with XLA's defaults, as its users get them.
+            options = None if name == "jax_md" or xla_defaults else jaxrot.compiler_options()
+            final_q, compile_s, seconds = time_compiled(run, state, repeats, options)
             finals[name] = final_q
             rows.append(
                 {
@@ -189,6 +192,11 @@ def main(argv=None):
     parser.add_argument("--no-peer", action="store_true", help="skip jax_md even when installed")
     parser.add_argument("--json", default=None, help="also write the rows here")
     parser.add_argument(
+        "--xla-defaults",
+        action="store_true",
+        help="compile jaxrot's programs with XLA's default options instead of jaxrot.compiler_options()",
+    )
+    parser.add_argument(
         "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
     )
     ns = parser.parse_args(argv)
@@ -201,11 +209,12 @@ def main(argv=None):
         parser.error(f"--schemes from {list(jaxrot.SCHEMES)}, --dtype float32/float64, --n >= 1")
     peer = have_jax_md() and not ns.no_peer
     info = machine()
+    info["jaxrot_compiler_options"] = {} if ns.xla_defaults else jaxrot.compiler_options()
     print("jaxrot throughput — heavy top, dt = 1e-3, particle-steps per second (millions), median of repeats")
     print(", ".join(f"{k} {v}" for k, v in info.items()))
     if not peer:
         print('jax_md: not measured (pip install -e ".[peers]", needs jax != 0.10.2, e.g. Python 3.12)')
-    rows = measure(sizes, dtypes, schemes, int(ns.work), ns.repeats, peer)
+    rows = measure(sizes, dtypes, schemes, int(ns.work), ns.repeats, peer, ns.xla_defaults)
     print(table(rows, peer))
     print(compile_table(rows))
     gaps = [r["max_angle_vs_no_squish_rad"] for r in rows if "max_angle_vs_no_squish_rad" in r]

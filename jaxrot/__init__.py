@@ -17,6 +17,7 @@ from . import (
     stability as stability,
     torques as torques,
 )
+from ._compile import compiler_options as compiler_options
 from ._diffrax._reference import reference_rollout as reference_rollout
 from ._diffrax._solver import solver as solver
 from ._diffrax._term import RigidBodyTerm as RigidBodyTerm

@@ -102,8 +102,10 @@ def fit_order(dts, errors) -> float:
 MIN_TIMED_S = 0.2  # a cheap run is repeated until this much time is sampled (at most 100 runs)
 
 
-def time_compiled(fn, arg, repeats):
+def time_compiled(fn, arg, repeats, compiler_options=None):
     """Compile ``fn`` for ``arg``, then time it: (output, compile s, median run s).
+
+    ``compiler_options`` go to ``jax.jit`` (`jaxrot.compiler_options` for jaxrot's programs).
 
     Compilation is timed alone (``lower().compile()``); one untimed run follows it.
     Then at least ``repeats`` runs, and more until `MIN_TIMED_S` is sampled: a run
@@ -111,7 +113,7 @@ def time_compiled(fn, arg, repeats):
     samples moved 2× between neighbouring rungs.
     """
     start = time.perf_counter()
-    compiled = jax.jit(fn).lower(arg).compile()
+    compiled = jax.jit(fn, compiler_options=compiler_options).lower(arg).compile()
     compile_s = time.perf_counter() - start
     out = jax.block_until_ready(compiled(arg))
     samples = []

@@ -10,10 +10,10 @@ import math
 import warnings
 from typing import Any, NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._compile import filter_jit
 from .._inertia import body_inertia
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState, Trajectory
@@ -168,7 +168,7 @@ def prepare_run(
     )
 
 
-@eqx.filter_jit
+@filter_jit  # with jaxrot's compiler options when called at top level (`jaxrot._compile`)
 def _rollout_flat(
     scheme,
     state,
