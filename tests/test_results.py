@@ -23,6 +23,11 @@ RESULTS = {
     "compile_cpu.json": ("method", "python benchmarks/regenerate.py --only compile"),
     "throughput_cpu.json": ("method", "python benchmarks/regenerate.py --only throughput"),
     "throughput_cpu_jax010.json": ("method", "python benchmarks/regenerate.py --only throughput_jax010"),
+    # Three schemes, the ones XLA:CPU's YNN fusions slowed: not per scheme.
+    "throughput_cpu_jax010_xla_defaults.json": (
+        None,
+        "python benchmarks/regenerate.py --only throughput_jax010_xla_defaults",
+    ),
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),

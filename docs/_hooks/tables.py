@@ -407,7 +407,7 @@ def throughput_peer_ratios(docs):
 
 
 def throughput_jax_versions(docs):
-    """Float64 throughput with jax 0.10.2 (M/s) and, in brackets, its ratio to the newest jax's run."""
+    """Throughput with jax 0.10.2 (M/s) and, in brackets, its ratio to the newest jax's run."""
     old = _read(docs, "throughput_cpu_jax010.json")
     new = _read(docs, "throughput_cpu.json")
     rate_new = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in new["rows"]}
@@ -425,6 +425,29 @@ def throughput_jax_versions(docs):
     note = f" (ratios against `docs/throughput_cpu.json`: jax {m['jax']}, commit {m['commit']})"
     return _table(["dtype", "N", *[f"`{m}`" for m in methods]], rows) + _provenance(
         "throughput_cpu_jax010.json", old["machine"], note
+    )
+
+
+def ynn_trap_table(docs):
+    """jax 0.10.2, float64: XLA's default options against `jaxrot.compiler_options` (M/s and ratio)."""
+    default = _read(docs, "throughput_cpu_jax010_xla_defaults.json")
+    ours = _read(docs, "throughput_cpu_jax010.json")
+    rate = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in ours["rows"]}
+    methods = list(dict.fromkeys(r["method"] for r in default["rows"]))
+    by = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in default["rows"]}
+    rows = []
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in default["rows"]):
+        cells = []
+        for m in methods:
+            before, after = by[(dtype, n, m)], rate.get((dtype, n, m))
+            cells.append(
+                f"{before * 1e-6:.3g} → "
+                + ("–" if after is None else f"{after * 1e-6:.3g} ({after / before:.2f}×)")
+            )
+        rows.append([dtype, _power_of_ten(n), *cells])
+    note = f" (with the options: `docs/throughput_cpu_jax010.json`, commit {ours['machine']['commit']})"
+    return _table(["dtype", "N", *[f"`{m}`" for m in methods]], rows) + _provenance(
+        "throughput_cpu_jax010_xla_defaults.json", default["machine"], note
     )
 
 
@@ -619,6 +642,7 @@ TABLES = {
     "identify_speed_table": identify_speed_table,
     "throughput_peer_ratios": throughput_peer_ratios,
     "throughput_jax_versions": throughput_jax_versions,
+    "ynn_trap_table": ynn_trap_table,
     "measured": measured,
     "front_door_speed": front_door_speed,
     "gradient_compile_summary": gradient_compile_summary,
