@@ -406,21 +406,30 @@ def throughput_peer_ratios(docs):
     return "Throughput over jax_md's NO_SQUISH in the same run (> 1: faster) — " + "; ".join(out) + "."
 
 
+def _throughput_grid(base, other, cell):
+    """``(methods, rows)``: a row ``[dtype, N, cell(base rate, other's) per method]`` per base row."""
+    rate = {
+        name: {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in data["rows"]}
+        for name, data in (("base", base), ("other", other))
+    }
+    methods = list(dict.fromkeys(r["method"] for r in base["rows"]))
+    rows = []
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in base["rows"]):
+        cells = [cell(rate["base"].get((dtype, n, m)), rate["other"].get((dtype, n, m))) for m in methods]
+        rows.append([dtype, _power_of_ten(n), *cells])
+    return methods, rows
+
+
 def throughput_jax_versions(docs):
     """Throughput with jax 0.10.2 (M/s) and, in brackets, its ratio to the newest jax's run."""
     old = _read(docs, "throughput_cpu_jax010.json")
     new = _read(docs, "throughput_cpu.json")
-    rate_new = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in new["rows"]}
-    methods = list(dict.fromkeys(r["method"] for r in old["rows"]))
-    rate_old = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in old["rows"]}
-    rows = []
-    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in old["rows"]):
-        cells = []
-        for m in methods:
-            mine, theirs = rate_old.get((dtype, n, m)), rate_new.get((dtype, n, m))
-            ratio = f" ({mine / theirs:.2f}×)" if mine and theirs else ""
-            cells.append("–" if mine is None else f"{mine * 1e-6:.3g}{ratio}")
-        rows.append([dtype, _power_of_ten(n), *cells])
+
+    def cell(mine, theirs):
+        ratio = f" ({mine / theirs:.2f}×)" if mine and theirs else ""
+        return "–" if mine is None else f"{mine * 1e-6:.3g}{ratio}"
+
+    methods, rows = _throughput_grid(old, new, cell)
     m = new["machine"]
     note = f" (ratios against `docs/throughput_cpu.json`: jax {m['jax']}, commit {m['commit']})"
     return _table(["dtype", "N", *[f"`{m}`" for m in methods]], rows) + _provenance(
@@ -432,19 +441,12 @@ def ynn_trap_table(docs):
     """jax 0.10.2, float64: XLA's default options against `jaxrot.compiler_options` (M/s and ratio)."""
     default = _read(docs, "throughput_cpu_jax010_xla_defaults.json")
     ours = _read(docs, "throughput_cpu_jax010.json")
-    rate = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in ours["rows"]}
-    methods = list(dict.fromkeys(r["method"] for r in default["rows"]))
-    by = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in default["rows"]}
-    rows = []
-    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in default["rows"]):
-        cells = []
-        for m in methods:
-            before, after = by[(dtype, n, m)], rate.get((dtype, n, m))
-            cells.append(
-                f"{before * 1e-6:.3g} → "
-                + ("–" if after is None else f"{after * 1e-6:.3g} ({after / before:.2f}×)")
-            )
-        rows.append([dtype, _power_of_ten(n), *cells])
+
+    def cell(before, after):
+        now = "–" if after is None else f"{after * 1e-6:.3g} ({after / before:.2f}×)"
+        return f"{before * 1e-6:.3g} → {now}"
+
+    methods, rows = _throughput_grid(default, ours, cell)
     note = f" (with the options: `docs/throughput_cpu_jax010.json`, commit {ours['machine']['commit']})"
     return _table(["dtype", "N", *[f"`{m}`" for m in methods]], rows) + _provenance(
         "throughput_cpu_jax010_xla_defaults.json", default["machine"], note
