@@ -313,13 +313,8 @@ def test_looped_stages_are_the_unrolled_stages(name):
     assert np.all(np.isfinite(grad)) and float(jnp.linalg.norm(grad)) > 0
 
 
-def test_derivatives_run_through_the_looped_stages_and_values_stay_unrolled():
-    """``loop_derivative_stages`` (the default): a rollout that is not differentiated is the unrolled
-    program, the same bits as ``loop_derivative_stages=False``; its derivatives, forward and
-    reverse, are the looped stages' (``loop_stages=True``), which differ from the unrolled ones by
-    the order of each stage's sums only: 10 steps of ~100 operations at float64's 1.1e-16 on
-    derivatives of order 1 stay far inside 1e-11. A torque that closes over a traced parameter is
-    closure-converted, so its derivative still flows."""
+def _looped_and_unrolled_final():
+    """``final(scheme, moments, scale)`` of a 10-step heavy-top rkmk4 run, and the unrolled RKMK4."""
     unrolled = jaxrot.schemes.RKMK4(loop_derivative_stages=False)
     state = principal_state()
     weights = jnp.array([0.2, -0.4, 0.5, 0.7])
@@ -331,13 +326,33 @@ def test_derivatives_run_through_the_looped_stages_and_values_stay_unrolled():
         )
         return jnp.sum(traj.q[-1] * weights) + jnp.sum(traj.omega[-1])
 
+    return final, unrolled
+
+
+def test_derivatives_run_through_the_looped_stages_and_values_stay_unrolled():
+    """``loop_derivative_stages`` (the default): a rollout that is not differentiated is the unrolled
+    program, the same bits as ``loop_derivative_stages=False``; its reverse derivative is the looped
+    stages' (``loop_stages=True``), which differs from the unrolled one by the order of each stage's
+    sums only: 10 steps of ~100 operations at float64's 1.1e-16 on derivatives of order 1 stay far
+    inside 1e-11. Forward mode and closure-converted torques: the slow test below."""
+    final, unrolled = _looped_and_unrolled_final()
     forward = jax.jit(lambda scheme_name_or_object, m: final(scheme_name_or_object, m), static_argnums=0)
     assert float(forward("rkmk4", MOMENTS)) == float(forward(unrolled, MOMENTS))
-    for derivative in (jax.grad, jax.jacfwd):
-        new = derivative(lambda m: final("rkmk4", m))(MOMENTS)
-        old = derivative(lambda m: final(unrolled, m))(MOMENTS)
-        np.testing.assert_allclose(new, old, rtol=0, atol=1e-11)
-        assert float(jnp.linalg.norm(new)) > 0
+    new = jax.grad(lambda m: final("rkmk4", m))(MOMENTS)
+    old = jax.grad(lambda m: final(unrolled, m))(MOMENTS)
+    np.testing.assert_allclose(new, old, rtol=0, atol=1e-11)
+    assert float(jnp.linalg.norm(new)) > 0
+
+
+@pytest.mark.slow
+def test_forward_derivatives_and_closed_over_parameters_run_through_the_looped_stages():
+    """As above for ``jax.jacfwd``; and a torque that closes over a traced parameter is
+    closure-converted, so its derivative still flows (same tolerance, same argument)."""
+    final, unrolled = _looped_and_unrolled_final()
+    new = jax.jacfwd(lambda m: final("rkmk4", m))(MOMENTS)
+    old = jax.jacfwd(lambda m: final(unrolled, m))(MOMENTS)
+    np.testing.assert_allclose(new, old, rtol=0, atol=1e-11)
+    assert float(jnp.linalg.norm(new)) > 0
     closed = jax.grad(lambda c: final("rkmk4", MOMENTS, c))(1.3)
     np.testing.assert_allclose(
         closed, jax.grad(lambda c: final(unrolled, MOMENTS, c))(1.3), rtol=0, atol=1e-11
