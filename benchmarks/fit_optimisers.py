@@ -10,7 +10,7 @@ saved), torque-free and as a heavy top. Every optimiser starts from `fit_inertia
 start (the linear angular-momentum estimate) and works on the same objective:
 
 - ``GN (jaxrot)``: ``jaxrot._fit._optimise``, `fit_inertia`'s optimiser with its
-  defaults (optimistix's Gauss–Newton descent with a backtracking Armijo search,
+  defaults (Gauss–Newton with a backtracking Armijo search, one compiled loop,
   forward-mode Jacobian, ``ftol=1e-7`` or the round-off floor, the loss history kept);
 - ``LM`` and ``GN (optimistix)``: ``optimistix.least_squares`` with
   ``LevenbergMarquardt`` / ``GaussNewton`` (``rtol=atol=1e-10``, their own Cauchy

@@ -5,7 +5,7 @@ default) from a fitted initial state; the objective is the mean squared
 geodesic angle between modelled and observed orientations (plus, when given,
 angular velocities). The tensor is parameterised so that only physically
 possible tensors can come out (`inertia_from_cholesky`); the optimiser is
-optimistix's Gauss–Newton, started from a linear angular-momentum-balance
+Gauss–Newton, started from a linear angular-momentum-balance
 estimate (see `fit_inertia` for the reasons).
 
 Long horizons: the scan over time is split into checkpointed chunks of about

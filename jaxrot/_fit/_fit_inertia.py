@@ -108,7 +108,7 @@ def fit_inertia(
     ``ω0 = R₀ I⁻¹ R₀ᵀ L₀``. It lands within ~0.3 % of the tensor, inside the basin
     of the nonlinear fit, so no multi-start is needed.
 
-    Optimiser: Gauss–Newton (optimistix's ``NewtonDescent`` on ``JᵀJ``, ``J`` by
+    Optimiser: Gauss–Newton (the step from a least-squares solve with ``J``, ``J`` by
     forward-mode differentiation of the residuals through the rollout) with a
     backtracking Armijo search from the full step, compiled as one loop. Why: the
     misfit of a long rollout is a narrow curved valley (the phase of the motion

@@ -22,6 +22,7 @@ from ._identify_model import (
     Model,
     pad_rows,
     residuals,
+    residuals_and_jacobian,
     states,
     unpack,
 )
@@ -32,8 +33,8 @@ from ._uncertainty import analyse, correlations, propagate
 
 
 # The default scheme and step: see `identify`'s docstring for the measurements behind them.
-DEFAULT_SCHEME = "rkmk4"
-DEFAULT_STEP_ANGLE = 0.2  # rad turned per step at the largest |ω| seen
+DEFAULT_SCHEME = "rkmk_dopri5"
+DEFAULT_STEP_ANGLE = 0.6  # rad turned per step at the largest |ω| seen
 
 
 class StandardErrors(NamedTuple):
@@ -561,6 +562,7 @@ def identify(
             jnp.asarray(floor_of(sigma), dtype),
             max_iter,
             minimum_norm=True,
+            jacobian_fn=residuals_and_jacobian,
         )
         n = int(n)
         raw = np.asarray(r, np.float64).reshape(k, 3, n_max, 3) * sigma[:, :, None, None]

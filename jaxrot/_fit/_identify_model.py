@@ -98,8 +98,8 @@ def inertia_of(phi_inertia, layout):
     return inertia * layout.trace0 if layout.unit_scale else inertia
 
 
-def unpack(phi, layout):
-    """``(inertia (3, 3), args, δq₀ (k, 3), ω₀ (k, 3))`` from ``φ``."""
+def _shared(phi, layout):
+    """``(inertia (3, 3), args)`` from ``φ``'s shared head: the inertia and free-argument coordinates."""
     i = layout.n_inertia
     inertia = inertia_of(phi[:i], layout)
     leaves = list(layout.leaves)
@@ -108,43 +108,95 @@ def unpack(phi, layout):
         value = phi[i : i + like.size].reshape(like.shape)
         leaves[index] = jnp.exp(value) if positive else value
         i += like.size
-    args = jax.tree_util.tree_unflatten(layout.treedef, leaves)
-    k = layout.n_experiments
-    dq = phi[i : i + 3 * k].reshape(k, 3)
-    omega0 = phi[i + 3 * k : i + 6 * k].reshape(k, 3)
-    return inertia, args, dq, omega0
+    return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves)
+
+
+def n_shared(layout):
+    """Length of ``φ``'s shared head: the rest is ``δq₀`` (k, 3) then ``ω₀`` (k, 3)."""
+    return layout.n_inertia + sum(layout.leaves[index].size for index, _ in layout.free_leaves)
+
+
+def unpack(phi, layout):
+    """``(inertia (3, 3), args, δq₀ (k, 3), ω₀ (k, 3))`` from ``φ``."""
+    i, k = n_shared(layout), layout.n_experiments
+    inertia, args = _shared(phi[:i], layout)
+    return inertia, args, phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
+
+
+def _one_states(shared, dq, omega0, d, model):
+    """Modelled ``q (P + 1, 4)``, ``ω (P + 1, 3)`` (world) of experiment ``d`` from its ``(δq₀, ω₀)``."""
+    inertia, args = _shared(shared, model.layout)
+    q0 = quat.multiply(quat.exp(dq), d.q_start)
+    run_args = args if d.control_t is None else (args, d.control_t, d.control_tau)
+    return sample_states(
+        model.scheme, model.torque, run_args, body_inertia(inertia), q0, omega0, d.t, model.substeps
+    )
+
+
+def _one_residuals(shared, dq, omega0, d, model):
+    """One experiment's whitened misfits ``(3 kinds, P + 1, 3)``, zero where not observed."""
+    q, omega = _one_states(shared, dq, omega0, d, model)
+    r_q = signed_vector(q, d.q)
+    r_omega = quat.rotate(quat.conjugate(q), omega) - d.omega_body
+    r_direction = quat.rotate(q, d.body_vector[None, :]) - d.direction
+    r = jnp.stack([r_q, r_omega, r_direction])
+    return r * (d.weight / d.sigma[:, None])[..., None]
+
+
+def _split(phi, model):
+    i, k = n_shared(model.layout), model.layout.n_experiments
+    return phi[:i], phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
 
 
 def states(phi, model):
     """Modelled ``q (k, P + 1, 4)``, ``ω (k, P + 1, 3)`` (world frame) at every padded sample."""
-    inertia, args, dq, omega0 = unpack(phi, model.layout)
-    d = model.data
-    q0 = quat.multiply(quat.exp(dq), d.q_start)
-    prepared = body_inertia(inertia)
-
-    def one(q0, omega0, t, control_t, control_tau):
-        run_args = args if control_t is None else (args, control_t, control_tau)
-        return sample_states(model.scheme, model.torque, run_args, prepared, q0, omega0, t, model.substeps)
-
-    axes = (0, 0, 0, None if d.control_t is None else 0, None if d.control_tau is None else 0)
-    return jax.vmap(one, in_axes=axes)(q0, omega0, d.t, d.control_t, d.control_tau)
-
-
-def raw_residuals(phi, model):
-    """Unwhitened misfits ``(k, 3 kinds, P + 1, 3)``, zero where a kind or sample is not observed."""
-    q, omega = states(phi, model)
-    d = model.data
-    r_q = signed_vector(q, d.q)
-    r_omega = quat.rotate(quat.conjugate(q), omega) - d.omega_body
-    r_direction = quat.rotate(q, d.body_vector[:, None, :]) - d.direction
-    r = jnp.stack([r_q, r_omega, r_direction], axis=1)
-    return r * d.weight[..., None]
+    shared, dq, omega0 = _split(phi, model)
+    one = lambda dq, omega0, d: _one_states(shared, dq, omega0, d, model)  # noqa: E731
+    return jax.vmap(one)(dq, omega0, model.data)
 
 
 def residuals(phi, model):
-    """The whitened residual vector (each misfit over its noise σ) whose sum of squares is minimised."""
-    r = raw_residuals(phi, model) / model.data.sigma[:, :, None, None]
-    return r.reshape(-1)
+    """The whitened residual vector (each misfit over its noise σ) whose sum of squares is minimised.
+
+    Experiment-major: experiment ``j``'s ``3 (P + 1) 3`` misfits, kind by kind, then ``j + 1``'s.
+    """
+    shared, dq, omega0 = _split(phi, model)
+    one = lambda dq, omega0, d: _one_residuals(shared, dq, omega0, d, model)  # noqa: E731
+    return jax.vmap(one)(dq, omega0, model.data).reshape(-1)
+
+
+def residuals_and_jacobian(phi, model):
+    """`residuals` and their Jacobian ``(m, len(φ))``, in forward mode, experiment by experiment.
+
+    Experiment ``j`` depends on the shared head of ``φ`` and on its own ``(δq₀, ω₀)``
+    only, so each rollout carries ``n_shared + 6`` tangents instead of ``len(φ)``
+    (15 instead of 27 for the three-manoeuvre satellite); the zero blocks of the
+    other experiments' starts are filled in afterwards.
+    """
+    shared, dq, omega0 = _split(phi, model)
+    k = model.layout.n_experiments
+
+    def one(dq, omega0, d):
+        def twice(shared, own):
+            r = _one_residuals(shared, own[:3], own[3:], d, model).reshape(-1)
+            return r, r
+
+        (j_shared, j_own), r = jax.jacfwd(twice, argnums=(0, 1), has_aux=True)(
+            shared, jnp.concatenate([dq, omega0])
+        )
+        return r, j_shared, j_own
+
+    r, j_shared, j_own = jax.vmap(one)(dq, omega0, model.data)  # (k, m), (k, m, n_shared), (k, m, 6)
+    eye = jnp.eye(k, dtype=phi.dtype)
+    m = r.shape[1]
+
+    def block_diagonal(block):  # (k, m, 3) → (k m, 3 k), experiment j's block in columns 3j … 3j + 2
+        return (block[:, :, None, :] * eye[:, None, :, None]).reshape(k * m, 3 * k)
+
+    jac = jnp.concatenate(
+        [j_shared.reshape(k * m, -1), block_diagonal(j_own[..., :3]), block_diagonal(j_own[..., 3:])], axis=1
+    )
+    return r.reshape(-1), jac
 
 
 def pad_rows(x, length):

@@ -13,6 +13,8 @@ standard error and is named, never a silently huge number.
 
 from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 
@@ -31,11 +33,8 @@ class Uncertainty(NamedTuple):
 
 def analyse(jac, g, scale, labels, rcond):
     """The `Uncertainty` of the user parameters ``p`` (Jacobian ``g = ∂p/∂φ``, typical sizes ``scale``)."""
-    jac = np.asarray(jac, np.float64)
     g = np.asarray(g, np.float64)
-    norms = np.linalg.norm(jac, axis=0)
-    d = np.where(norms > 0, 1 / np.where(norms > 0, norms, 1), 1.0)
-    _, s, vt = np.linalg.svd(jac * d, full_matrices=False)
+    d, s, vt = (np.asarray(x, np.float64) for x in _scaled_svd(jnp.asarray(jac)))
     keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
     directions = d[:, None] * vt.T  # columns: right singular vectors in φ
     kept = directions[:, keep]
@@ -52,6 +51,19 @@ def analyse(jac, g, scale, labels, rcond):
     covariance[:, involved] = np.inf
     named = tuple(label for label, b in zip(labels, bad, strict=True) if b)
     return Uncertainty(covariance, stderr, named, cov_phi, null)
+
+
+@jax.jit
+def _scaled_svd(jac):
+    """Column scales ``d`` (1 / column norm) and the singular values and right vectors of ``J diag(d)``.
+
+    Compiled, not NumPy's: called right after the fit, NumPy's LAPACK took 108 ms
+    for a 3 267 × 27 ``J`` (2 ms alone), competing with XLA's still-spinning threads.
+    """
+    norms = jnp.linalg.norm(jac, axis=0)
+    d = jnp.where(norms > 0, 1 / jnp.where(norms > 0, norms, 1), 1.0)
+    _, s, vt = jnp.linalg.svd(jac * d[None, :], full_matrices=False)
+    return d, s, vt
 
 
 def involved_in(moves, scale):
