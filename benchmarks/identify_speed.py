@@ -4,7 +4,7 @@ The test satellite (`tests/_telemetry.py`: 3 manoeuvres of 121 star-tracker and 
 known magnetorquer torques, unknown inertia tensor and residual dipole) is fitted twice from the
 same start (a diagonal inertia, zero dipole, each start state from its first samples):
 
-- jaxrot: `jaxrot.identify` with its defaults (rkmk4 at 0.2 rad per step), covariance included;
+- jaxrot: `jaxrot.identify` with its defaults (its scheme and step rule), covariance included;
 - as a diffrax user would write it: the Euclidean quaternion ODE (q̇ = ½ ω ⊗ q, L̇ = τ) with
   Tsit5 or Dopri5 at fixed steps, the finest of spacing/1, /2, /4, … not needed: the coarsest
   whose orientation error against the reference at the true parameters is at most jaxrot's, then
@@ -188,7 +188,8 @@ def main(argv=None):
           f"{fit.n_iterations} iterations; model error at the truth {ours_error:.1e} rad")  # fmt: skip
     print(f"jaxrot estimate − truth, in standard errors: max {np.max(np.abs(ours - truth) / se):.2f}")
 
-    rows = [("jaxrot.identify (rkmk4, covariance included)", first, run, fit.loss, 0.0, ours_error)]
+    label = f"jaxrot.identify ({fit.scheme}, {substeps} step(s) per sample, covariance included)"
+    rows = [(label, first, run, fit.loss, 0.0, ours_error)]
     start = {
         "inertia": jnp.asarray(INERTIA0[ELEMENTS]),
         "dipole": jnp.zeros(3),

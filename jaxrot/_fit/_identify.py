@@ -255,27 +255,32 @@ def identify(
     times the largest are undetermined: the parameters they move are listed in
     ``unidentified``, get infinite standard errors and a warning.
 
-    Default scheme: ``"rkmk4"`` (fourth-order Lie-group Runge–Kutta) at steps
-    turning the body by at most 0.2 rad at the largest ``|ω|`` seen. Measured on
-    the three-manoeuvre satellite of ``tests/_telemetry.py`` (noise-free data from
-    the reference solver; bias = the largest parameter error in standard errors
-    of the noisy fit; 2-core CPU, float64; reproduced by
+    Default scheme: ``"rkmk_dopri5"`` (fifth-order Lie-group Runge–Kutta) at
+    steps turning the body by at most 0.6 rad at the largest ``|ω|`` seen.
+    Measured on the three-manoeuvre satellite of ``tests/_telemetry.py``
+    (noise-free data from the reference solver, 5 s sample spacing, |ω| ≤ 0.12
+    rad/s; bias = the largest parameter error in standard errors of the noisy
+    fit; 2-core CPU, float64, one run each; reproduced by
     ``benchmarks/identify_schemes.py``):
 
-    =========  ==========  ===================  ==========  ==============
-    scheme     step (rad)  bias / std. error    fit (s)     first call (s)
-    =========  ==========  ===================  ==========  ==============
-    zhao       0.05        4.3                  0.60        11.6
-    zhao       0.2         38                   0.36        12.4
-    rkmk4      0.05        8e-5                 2.74        —
-    rkmk4      0.2         0.0066               0.89        23.9
-    rkmk4      0.5         0.6                  0.51        18.9
-    splitting  0.05        0.46                 5.71        30.5
-    =========  ==========  ===================  ==========  ==============
+    ===========  ==========  ========  =================  =======  ==============
+    scheme       step (rad)  substeps  bias / std. error  fit (s)  first call (s)
+    ===========  ==========  ========  =================  =======  ==============
+    zhao         0.05        9         4.3                0.15     7.0
+    zhao         0.2         3         38                 0.13     7.6
+    rkmk4        0.05        9         8e-5               0.45     9.8
+    rkmk4        0.2         3         0.0066             0.14     9.6
+    rkmk4        0.5         1         0.6                0.09     —
+    rkmk_dopri5  0.15        3         3e-5               0.31     10.9
+    rkmk_dopri5  0.3         2         8e-5               0.20     10.9
+    rkmk_dopri5  0.6         1         0.0015             0.13     11.0
+    splitting    0.05        9         0.46               0.39     22.9
+    ===========  ==========  ========  =================  =======  ==============
 
     Second-order schemes bias the fit by several standard errors at any step
-    that runs as fast; ``rkmk4`` at 0.2 rad leaves a bias of < 1 % of a standard
-    error. Its cost is the compile (about 20 s on this machine).
+    that runs as fast; ``rkmk_dopri5`` at one step per sample leaves a bias
+    of 0.15 % of a standard error with the fewest stages per sample (6, against
+    ``rkmk4``'s 12 at 0.2 rad). Its cost is the compile (about 11 s here).
 
     Args:
         experiments: one `jaxrot.Experiment` or a sequence of them.
