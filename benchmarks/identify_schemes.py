@@ -31,7 +31,12 @@ noisy, _ = satellite_experiments(0)
 args = {"dipole": jnp.zeros(3)}
 ref = jaxrot.identify(noisy, torque=dipole_torque, args=args, free_args={"dipole": True}, scheme="rkmk4")
 print("| scheme | step angle | substeps | bias / se (max over inertia, dipole) | run s | first call s |")
-ANGLES = {"zhao": [0.05, 0.2], "rkmk4": [0.05, 0.2, 0.5], "rkmk_dopri5": [0.15, 0.3, 0.6], "splitting": [0.05]}
+ANGLES = {
+    "zhao": [0.05, 0.2],
+    "rkmk4": [0.05, 0.2, 0.5],
+    "rkmk_dopri5": [0.15, 0.3, 0.6],
+    "splitting": [0.05],
+}
 for scheme, angles in ANGLES.items():
     for angle in angles:
         identify_module.DEFAULT_STEP_ANGLE = angle
