@@ -116,11 +116,16 @@ def n_shared(layout):
     return layout.n_inertia + sum(layout.leaves[index].size for index, _ in layout.free_leaves)
 
 
+def _split(phi, layout):
+    """``φ`` as its shared head, ``δq₀ (k, 3)`` and ``ω₀ (k, 3)``."""
+    i, k = n_shared(layout), layout.n_experiments
+    return phi[:i], phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
+
+
 def unpack(phi, layout):
     """``(inertia (3, 3), args, δq₀ (k, 3), ω₀ (k, 3))`` from ``φ``."""
-    i, k = n_shared(layout), layout.n_experiments
-    inertia, args = _shared(phi[:i], layout)
-    return inertia, args, phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
+    shared, dq, omega0 = _split(phi, layout)
+    return *_shared(shared, layout), dq, omega0
 
 
 def _one_states(shared, dq, omega0, d, model):
@@ -143,14 +148,9 @@ def _one_residuals(shared, dq, omega0, d, model):
     return r * (d.weight / d.sigma[:, None])[..., None]
 
 
-def _split(phi, model):
-    i, k = n_shared(model.layout), model.layout.n_experiments
-    return phi[:i], phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
-
-
 def states(phi, model):
     """Modelled ``q (k, P + 1, 4)``, ``ω (k, P + 1, 3)`` (world frame) at every padded sample."""
-    shared, dq, omega0 = _split(phi, model)
+    shared, dq, omega0 = _split(phi, model.layout)
     one = lambda dq, omega0, d: _one_states(shared, dq, omega0, d, model)  # noqa: E731
     return jax.vmap(one)(dq, omega0, model.data)
 
@@ -160,7 +160,7 @@ def residuals(phi, model):
 
     Experiment-major: experiment ``j``'s ``3 (P + 1) 3`` misfits, kind by kind, then ``j + 1``'s.
     """
-    shared, dq, omega0 = _split(phi, model)
+    shared, dq, omega0 = _split(phi, model.layout)
     one = lambda dq, omega0, d: _one_residuals(shared, dq, omega0, d, model)  # noqa: E731
     return jax.vmap(one)(dq, omega0, model.data).reshape(-1)
 
@@ -173,7 +173,7 @@ def residuals_and_jacobian(phi, model):
     (15 instead of 27 for the three-manoeuvre satellite); the zero blocks of the
     other experiments' starts are filled in afterwards.
     """
-    shared, dq, omega0 = _split(phi, model)
+    shared, dq, omega0 = _split(phi, model.layout)
     k = model.layout.n_experiments
 
     def one(dq, omega0, d):
