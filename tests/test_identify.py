@@ -274,7 +274,7 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
     differently, so entries agree to reassociation only: ~10³ operations per entry (20 steps of a
     few dozen) at float64's 1.1e-16, inside 1e-11 of the largest entry."""
     from jaxrot._fit import _identify
-    from jaxrot._fit._identify_model import residuals, residuals_and_jacobian
+    from jaxrot._fit._identify_model import residuals, residuals_and_jacobian, states
 
     seen = {}
 
@@ -307,13 +307,18 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
             scheme="zhao", dt=0.05,
         )  # fmt: skip
     phi, model = seen["phi"], seen["model"]
-    r, jac = jax.jit(residuals_and_jacobian)(phi, model)
+    r, jac, (q, omega) = jax.jit(residuals_and_jacobian)(phi, model)
     full = jax.jit(jax.jacfwd(residuals))(phi, model)
     assert jac.shape == full.shape == (r.size, 6 + 1 + 2 * 6)
     # The values ride along as jacfwd's primal, compiled in another program: each of the 20 steps
     # rounds the state by a few eps (~1e-15 rad), whitened by σ = 1e-3: 1e-11 is 10× that margin.
     np.testing.assert_allclose(r, jax.jit(residuals)(phi, model), rtol=0, atol=1e-11)
     np.testing.assert_allclose(jac, full, rtol=0, atol=1e-11 * float(jnp.max(jnp.abs(full))))
+    # The modelled states that ride along (the fit reports them without another program) are the
+    # forward model's, to the same 20 steps' round-off (a few eps each, unwhitened: 1e-13).
+    q_ref, omega_ref = jax.jit(states)(phi, model)
+    np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(omega, omega_ref, rtol=0, atol=1e-13)
     # The blocks the rollouts did not compute are the zeros they must be: experiment 0's rows do
     # not move with experiment 1's start.
     rows = r.size // 2

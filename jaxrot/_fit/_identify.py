@@ -23,7 +23,6 @@ from ._identify_model import (
     pad_rows,
     residuals,
     residuals_and_jacobian,
-    states,
     unpack,
 )
 from ._initial import _linear_estimate, estimate_omega
@@ -266,21 +265,21 @@ def identify(
     ===========  ==========  ========  =================  =======  ==============
     scheme       step (rad)  substeps  bias / std. error  fit (s)  first call (s)
     ===========  ==========  ========  =================  =======  ==============
-    zhao         0.05        9         4.3                0.15     7.0
-    zhao         0.2         3         38                 0.13     7.6
-    rkmk4        0.05        9         8e-5               0.45     9.8
-    rkmk4        0.2         3         0.0066             0.14     9.6
-    rkmk4        0.5         1         0.6                0.09     —
-    rkmk_dopri5  0.15        3         3e-5               0.31     10.9
-    rkmk_dopri5  0.3         2         8e-5               0.20     10.9
-    rkmk_dopri5  0.6         1         0.0015             0.13     11.0
-    splitting    0.05        9         0.46               0.39     22.9
+    zhao         0.05        9         4.3                0.21     4.7
+    zhao         0.2         3         38                 0.12     6.4
+    rkmk4        0.05        9         8e-5               0.46     6.6
+    rkmk4        0.2         3         0.0066             0.16     6.3
+    rkmk4        0.5         1         0.6                0.11     —
+    rkmk_dopri5  0.15        3         3e-5               0.20     6.6
+    rkmk_dopri5  0.3         2         8e-5               0.21     6.8
+    rkmk_dopri5  0.6         1         0.0015             0.14     6.4
+    splitting    0.05        9         0.46               0.57     14.3
     ===========  ==========  ========  =================  =======  ==============
 
     Second-order schemes bias the fit by several standard errors at any step
     that runs as fast; ``rkmk_dopri5`` at one step per sample leaves a bias
     of 0.15 % of a standard error with the fewest stages per sample (6, against
-    ``rkmk4``'s 12 at 0.2 rad). Its cost is the compile (about 11 s here).
+    ``rkmk4``'s 12 at 0.2 rad), and compiles in about the time of the others (6–7 s here).
 
     Args:
         experiments: one `jaxrot.Experiment` or a sequence of them.
@@ -559,7 +558,7 @@ def identify(
 
     def run(phi, model):
         sigma = np.asarray(model.data.sigma, np.float64)
-        z, history, n, converged, r, jac = gauss_newton(
+        z, history, n, converged, r, jac, fitted = gauss_newton(
             residuals,
             jnp.asarray(phi, dtype),
             model,
@@ -572,9 +571,11 @@ def identify(
         n = int(n)
         raw = np.asarray(r, np.float64).reshape(k, 3, n_max, 3) * sigma[:, :, None, None]
         history = np.asarray(history[: n + 1], np.float64)
-        return np.asarray(z, np.float64), history, n, bool(converged), raw, np.asarray(jac, np.float64)
+        fitted = tuple(np.asarray(x, np.float64) for x in fitted)
+        jac = np.asarray(jac, np.float64)
+        return np.asarray(z, np.float64), history, n, bool(converged), raw, jac, fitted
 
-    phi, history, n_iterations, converged, raw, jac = run(phi0, model)
+    phi, history, n_iterations, converged, raw, jac, fitted = run(phi0, model)
     sigma = np.asarray(data.sigma, np.float64)
     if estimated.any():
         rss = np.sum(raw**2, axis=(2, 3))
@@ -585,7 +586,7 @@ def identify(
         sigma = np.where(estimated, np.maximum(estimate, floor), sigma)
         model = eqx.tree_at(lambda m: m.data.sigma, model, jnp.asarray(sigma, dtype))
         if int(np.sum(counts > 0)) > 1:  # the kinds' relative weights changed: fit again from here
-            phi, more, n_more, converged, raw, jac = run(phi, model)
+            phi, more, n_more, converged, raw, jac, fitted = run(phi, model)
             history = np.concatenate([history, more[1:]])
             n_iterations += n_more
         else:  # one kind: the same optimum, the Jacobian rescaled
@@ -593,7 +594,7 @@ def identify(
 
     # --- uncertainty ---
     phi_j = jnp.asarray(phi, dtype)
-    g, g_all, (inertia, args_fit, dq, omega_fit) = _parameter_jacobians(
+    g, g_all, (inertia, args_fit, _, omega_fit), q_fit0 = _parameter_jacobians(
         phi_j, layout, data.q_start, free_inertia
     )
     g, g_all = np.asarray(g, np.float64), np.asarray(g_all, np.float64)
@@ -655,7 +656,7 @@ def identify(
         )
 
     # --- the fitted model at the samples ---
-    q_fit, omega_world = (np.asarray(x, np.float64) for x in _states(phi_j, model))
+    q_fit, omega_world = fitted  # the modelled states at phi, from the fit's last evaluation
     whitened = raw / np.asarray(model.data.sigma, np.float64)[:, :, None, None]
     trajectories, residual_dicts = [], []
     for j, e in enumerate(experiments):
@@ -675,7 +676,6 @@ def identify(
                 parts[name] = r
         residual_dicts.append(parts)
     sigma_out = np.where(counts > 0, np.asarray(model.data.sigma, np.float64), np.nan)
-    q_fit0 = quat.multiply(quat.exp(dq), data.q_start)
     return Identification(
         inertia=jnp.asarray(inertia, dtype),
         args=args_fit if free_leaves else args,
@@ -699,12 +699,9 @@ def identify(
     )
 
 
-_states = eqx.filter_jit(states)
-
-
 @eqx.filter_jit
 def _parameter_jacobians(phi, layout, q_start, free_inertia):
-    """``∂p/∂φ`` of the labelled parameters, ``∂(all fields)/∂φ``, and the unpacked parameters."""
+    """``∂p/∂φ`` of the labelled parameters, ``∂(all fields)/∂φ``, the unpacked parameters and ``q₀``."""
 
     def user_values(phi):
         inertia, args_fit, dq, omega_fit = unpack(phi, layout)
@@ -725,4 +722,6 @@ def _parameter_jacobians(phi, layout, q_start, free_inertia):
         leaves = [jnp.ravel(leaf) for leaf in jax.tree_util.tree_leaves(args_fit)]
         return jnp.concatenate([inertia.ravel(), *leaves, q_fit.ravel(), omega_fit.ravel()])
 
-    return jax.jacfwd(user_values)(phi), jax.jacfwd(all_values)(phi), unpack(phi, layout)
+    unpacked = unpack(phi, layout)
+    q_fit0 = quat.multiply(quat.exp(unpacked[2]), q_start)
+    return jax.jacfwd(user_values)(phi), jax.jacfwd(all_values)(phi), unpacked, q_fit0

@@ -140,7 +140,11 @@ def _one_states(shared, dq, omega0, d, model):
 
 def _one_residuals(shared, dq, omega0, d, model):
     """One experiment's whitened misfits ``(3 kinds, P + 1, 3)``, zero where not observed."""
-    q, omega = _one_states(shared, dq, omega0, d, model)
+    return _misfits(*_one_states(shared, dq, omega0, d, model), d)
+
+
+def _misfits(q, omega, d):
+    """Whitened misfits ``(3 kinds, P + 1, 3)`` of the modelled ``q``, ``ω`` to experiment ``d``."""
     r_q = signed_vector(q, d.q)
     r_omega = quat.rotate(quat.conjugate(q), omega) - d.omega_body
     r_direction = quat.rotate(q, d.body_vector[None, :]) - d.direction
@@ -166,27 +170,30 @@ def residuals(phi, model):
 
 
 def residuals_and_jacobian(phi, model):
-    """`residuals` and their Jacobian ``(m, len(φ))``, in forward mode, experiment by experiment.
+    """`residuals`, their Jacobian ``(m, len(φ))`` and `states`, in forward mode, experiment by experiment.
 
     Experiment ``j`` depends on the shared head of ``φ`` and on its own ``(δq₀, ω₀)``
     only, so each rollout carries ``n_shared + 6`` tangents instead of ``len(φ)``
     (15 instead of 27 for the three-manoeuvre satellite); the zero blocks of the
-    other experiments' starts are filled in afterwards.
+    other experiments' starts are filled in afterwards. The modelled states ride
+    along (the rollout's primal), so a fit needs no separate program for them.
     """
     shared, dq, omega0 = _split(phi, model.layout)
     k = model.layout.n_experiments
 
     def one(dq, omega0, d):
         def twice(shared, own):
-            r = _one_residuals(shared, own[:3], own[3:], d, model).reshape(-1)
-            return r, r
+            q, omega = _one_states(shared, own[:3], own[3:], d, model)
+            r = _misfits(q, omega, d).reshape(-1)
+            return r, (r, q, omega)
 
-        (j_shared, j_own), r = jax.jacfwd(twice, argnums=(0, 1), has_aux=True)(
+        (j_shared, j_own), (r, q, omega) = jax.jacfwd(twice, argnums=(0, 1), has_aux=True)(
             shared, jnp.concatenate([dq, omega0])
         )
-        return r, j_shared, j_own
+        return r, j_shared, j_own, q, omega
 
-    r, j_shared, j_own = jax.vmap(one)(dq, omega0, model.data)  # (k, m), (k, m, n_shared), (k, m, 6)
+    # (k, m), (k, m, n_shared), (k, m, 6), (k, P + 1, 4), (k, P + 1, 3)
+    r, j_shared, j_own, q, omega = jax.vmap(one)(dq, omega0, model.data)
     eye = jnp.eye(k, dtype=phi.dtype)
     m = r.shape[1]
 
@@ -196,7 +203,7 @@ def residuals_and_jacobian(phi, model):
     jac = jnp.concatenate(
         [j_shared.reshape(k * m, -1), block_diagonal(j_own[..., :3]), block_diagonal(j_own[..., 3:])], axis=1
     )
-    return r.reshape(-1), jac
+    return r.reshape(-1), jac, (q, omega)
 
 
 def pad_rows(x, length):
