@@ -139,33 +139,41 @@ class AbstractRKNSplitting(AbstractRotorSplitting):
 
         # One (rotor, kick) pair per scan iteration: the step compiles one rotor, not fifteen.
         q_p = quat.multiply(q, principal)
+        if tau is None and torque is not None:
+            tau = jnp.zeros_like(omega)
         if self.kick_first:
             if torque is not None:
                 omega = omega + _kick(q_p, moments, (float(kicks[0]) * dt) * tau)
-            pairs = (rotors, kicks[1:])
+            # Row i: rotor a_i, then kick b_{i+1} at the fraction of the step elapsed (time advances
+            # in the rotor flows only).
+            rows = np.stack([rotors, kicks[1:], np.cumsum(rotors), np.ones_like(rotors)], axis=1)
         else:
-            q_p, omega = rotor(q_p, omega, float(rotors[0]))
-            pairs = (rotors[1:], kicks)
-        # Row i: (rotor a_i, kick b_{i+1}) for BAB, (kick b_i, rotor a_{i+1}) for ABA, with the
-        # fraction of the step elapsed at the kick (time advances in the rotor flows only).
-        if self.kick_first:
-            rows = np.stack([pairs[0], pairs[1], np.cumsum(pairs[0])], axis=1)
-        else:
-            elapsed = rotors[0] + np.concatenate([[0.0], np.cumsum(pairs[0])[:-1]])
-            rows = np.stack([pairs[1], pairs[0], elapsed], axis=1)
+            # Row i: rotor a_i, then kick b_i, except after the last rotor (no kick: its torque is
+            # skipped by a `lax.cond` on the row, which the particles share, so it stays a branch
+            # under `vmap`). All fifteen rotors of SRKN14a in the loop: the first one outside it
+            # was a second rotor program, and its gradient compiled in 18 s (see the closing note).
+            rows = np.stack(
+                [rotors, np.append(kicks, 0.0), np.cumsum(rotors), np.append(np.ones_like(kicks), 0.0)],
+                axis=1,
+            )
 
         def pair(loop, row):
             q_p, omega, tau = loop
-            if self.kick_first:
-                q_p, omega = rotor(q_p, omega, row[0])
+            q_p, omega = rotor(q_p, omega, row[0])
             if torque is not None:
-                omega, tau = kick(q_p, omega, row[1] if self.kick_first else row[0], row[2])
-            if not self.kick_first:
-                q_p, omega = rotor(q_p, omega, row[1])
+                if self.kick_first:
+                    omega, tau = kick(q_p, omega, row[1], row[2])
+                else:
+                    omega, tau = jax.lax.cond(
+                        row[3] > 0,
+                        lambda q_p, omega, tau: kick(q_p, omega, row[1], row[2]),
+                        lambda q_p, omega, tau: (omega, tau),
+                        q_p,
+                        omega,
+                        tau,
+                    )
             return (q_p, omega, tau), None
 
-        if tau is None and torque is not None:
-            tau = jnp.zeros_like(omega)
         (q_p, omega, tau), _ = jax.lax.scan(pair, (q_p, omega, tau), jnp.asarray(rows, dtype))
         q1 = quat.multiply(q_p, to_body)
         return SplittingCarry(RotState(q1, omega), tau if self.kick_first else None, moments, principal)
