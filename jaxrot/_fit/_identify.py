@@ -184,10 +184,17 @@ def _start_orientation(e):
     return np.array([1.0, 0, 0, 0])
 
 
+def _rotate_numpy(q, v):
+    """`jaxrot.quaternion.rotate` in NumPy, for the start estimates (eager JAX dispatched ~30 small ops)."""
+    w, u = q[0], np.asarray(q[1:], np.float64)
+    t = 2 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
 def _start_omega(e, q_start):
     rows = _finite_rows(e.omega_body)
     if rows.size:
-        return np.asarray(quat.rotate(jnp.asarray(q_start), jnp.asarray(e.omega_body[rows[0]], jnp.float64)))
+        return _rotate_numpy(np.asarray(q_start, np.float64), np.asarray(e.omega_body[rows[0]], np.float64))
     rows = _finite_rows(e.q)
     if rows.size >= 3:
         return estimate_omega(e.t[rows[:3]], sign_continuous(e.q[rows[:3]]))[0]
@@ -420,10 +427,12 @@ def identify(
     if momentum is not None and np.all(np.isfinite(momentum)):
         # ω₀ = R₀ I⁻¹ R₀ᵀ L₀ from the momentum fitted to all samples of that record: better than differences.
         if _finite_rows(experiments[best].q)[0] == 0:
-            rot = np.asarray(quat.to_matrix(jnp.asarray(q_first)))
+            q_first = np.asarray(q_first, np.float64)
+            q_first_inverse = q_first * np.array([1.0, -1.0, -1.0, -1.0])
             scaled = start * (trace0 / np.trace(start)) if unit_scale else start
             momentum = momentum * (trace0 / np.trace(start)) if unit_scale else momentum
-            candidate = rot @ np.linalg.solve(scaled, rot.T @ momentum)
+            body = np.linalg.solve(scaled, _rotate_numpy(q_first_inverse, momentum))
+            candidate = _rotate_numpy(q_first, body)
             if np.all(np.isfinite(candidate)):
                 omega_starts[best] = candidate
     q_starts = _check_starts(q0, "q0", k, 4) if q0 is not None else q_starts
