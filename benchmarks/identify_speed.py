@@ -12,7 +12,7 @@ same start (a diagonal inertia, zero dipole, each start state from its first sam
   the same 27 parameters (six inertia elements, dipole, per manoeuvre a rotation-vector offset of
   q₀ and ω₀). The optimistix side gets no covariance: its time is the fit alone.
 
-Both sides are timed compiled (median of 3 runs) and with their first call (compile included);
+Both sides are timed compiled (median of 7 runs) and with their first call (compile included);
 "same fit quality" is checked as the largest difference of the inertia and dipole between the two
 fits in units of jaxrot's standard errors, and the final losses.
 
@@ -48,7 +48,7 @@ ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
 INERTIA0 = np.diag([0.04, 0.05, 0.06])
 
 
-def timed(fn, repeats=3):
+def timed(fn, repeats=7):
     """(first call s, median of ``repeats`` later calls s, last result)."""
     t0 = time.perf_counter()
     out = jax.block_until_ready(fn())
