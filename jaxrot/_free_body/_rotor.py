@@ -422,11 +422,16 @@ def _dmv_steps_jvp(primals, tangents):
         q, m = step((_split(z[:4]), _split(z[4:n_s])))
         return jnp.stack(q + m)
 
+    def with_value(z):
+        value = flat(z)
+        return value, value
+
     def step(carry):
         state, jac = carry  # (7,) and its Jacobian in (state, θ) after the first steps, (7, 14)
-        d = jax.jacfwd(flat)(jnp.concatenate([state, theta]))  # ∂ step / ∂ (state, θ): (7, 14)
+        # ∂ step / ∂ (state, θ): (7, 14), and the step's value from the same trace (jacfwd's primal).
+        d, state = jax.jacfwd(with_value, has_aux=True)(jnp.concatenate([state, theta]))
         jac = d[:, :n_s] @ jac + jnp.concatenate([jnp.zeros_like(d[:, :n_s]), d[:, n_s:]], axis=1)
-        return flat(jnp.concatenate([state, theta])), jac
+        return state, jac
 
     state, jac = _repeat((state, jnp.eye(n_s, size, dtype=state.dtype)), n - _MIN_SUBSTEPS, step)
     d_state = jac @ z_tangent
