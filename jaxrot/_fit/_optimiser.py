@@ -13,14 +13,14 @@ same start, iterations in brackets; L-BFGS is the previous optimiser):
 ==========================  ==============  ==============  ===========  ===========
 data                        L-BFGS (then)   GN (here)       optx GN      optx LM
 ==========================  ==============  ==============  ===========  ===========
-noisy, torque-free          0.504 s (2)     0.072 s (2)     0.098 (5)    0.275 (12)
-noisy, heavy top            0.864 s (2)     0.074 s (2)     0.148 (5)    1.037 (29)
-noise-free, torque-free     0.400 s (2)     0.014 s (2)     0.020 (4)    0.057 (10)
-noise-free, heavy top       0.465 s (3)     0.022 s (3)     0.030 (5)    0.100 (11)
+noisy, torque-free          0.504 s (2)     0.055 s (2)     0.096 (5)    0.304 (12)
+noisy, heavy top            0.864 s (2)     0.085 s (2)     0.160 (5)    1.064 (29)
+noise-free, torque-free     0.400 s (2)     0.020 s (2)     0.021 (4)    0.056 (10)
+noise-free, heavy top       0.465 s (3)     0.017 s (3)     0.033 (5)    0.083 (11)
 ==========================  ==============  ==============  ===========  ===========
 
 (GN and optx: one run, 2026-11-25, jax 0.10.2; L-BFGS: an earlier session's run.) Gauss–Newton
-is 6–29× faster than the L-BFGS it replaced and 1.3–2.0× faster than optimistix's own.
+is 9–27× faster than the L-BFGS it replaced and 1.0–1.9× faster than optimistix's own.
 
 All reach the same objective (noisy: 3.0656e-06 and 3.0694e-06; noise-free:
 round-off, 3e-30 to 3e-27) and the same moments to ~1e-8 relative (here and
