@@ -101,12 +101,14 @@ ARMIJO_FACTOR = 0.5  # and halve it otherwise
 
 
 def _least_squares_step(jac, r, minimum_norm):
-    """The Gauss–Newton step ``d`` minimising ``|J d + r|``: by SVD (the minimum-norm ``d``) or QR."""
+    """The Gauss–Newton step ``d`` minimising ``|J d + r|``: ``J = Q R``, then the SVD of ``R`` (the
+    minimum-norm ``d``) or a triangular solve."""
     q, upper = jnp.linalg.qr(jac)
     if minimum_norm:
         # The SVD of the small triangular factor (J = Q R, R = U S Vᵀ: J's singular values and right
-        # vectors; Chan, ACM TOMS 8, 1982): 2.2 ms instead of 7.0 ms for the SVD of the 3 267 × 27
-        # Jacobian of `jaxrot.identify`'s satellite, same step to 1e-15.
+        # vectors; Chan, ACM TOMS 8, 1982): 2.2 ms instead of 7.0 ms for the whole step on a 3 267 × 27
+        # matrix with column norms spread over 5 decades like the Jacobian of `jaxrot.identify`'s
+        # satellite (one-off script), same step to 1e-15.
         u, s, vt = jnp.linalg.svd(upper, full_matrices=False)
         # lineax's and numpy's cut-off: singular values below eps · max(m, n) · s_max count as zero.
         cutoff = jnp.finfo(jac.dtype).eps * max(jac.shape) * s[0]
@@ -180,7 +182,8 @@ def gauss_newton(
     # the Jacobian program is compiled once, inside the loop, and traced once, here, instead of
     # also before the loop: on the three-manoeuvre satellite of `jaxrot.identify`, tracing 1.7 →
     # 1.0 s and compiling 5.2 → 3.8 s; with the states riding along as ``aux`` (no program of their
-    # own, 1.6 s) its first call went from 12.0 to 6.4 s.
+    # own, 1.6 s) its first call went from 12.0 to 6.4 s (one run each, `jax_log_compiles`, at
+    # 06a7bff; `benchmarks/identify_speed.py` has the current figure).
     # Traced once, for the carry's shapes and for the loop's body (tracing the Jacobian is ~1 s).
     traced, shapes = jax.make_jaxpr(evaluate, return_shape=True)(z0)
     out_tree = jax.tree_util.tree_structure(shapes)

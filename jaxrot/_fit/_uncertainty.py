@@ -60,7 +60,7 @@ def _scaled_svd(jac):
     Compiled, not NumPy's: called right after the fit, NumPy's LAPACK took 108 ms
     for a 3 267 × 27 ``J`` (2 ms alone), competing with XLA's still-spinning threads.
     The SVD is that of the triangular factor of ``J diag(d) = Q R`` (the same singular
-    values and right vectors): 1.1 ms instead of 2.5 ms.
+    values and right vectors): 1.1 ms instead of 2.5 ms (unit columns, no ``U`` needed).
     """
     norms = jnp.linalg.norm(jac, axis=0)
     d = jnp.where(norms > 0, 1 / jnp.where(norms > 0, norms, 1), 1.0)

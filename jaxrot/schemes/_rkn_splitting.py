@@ -151,7 +151,7 @@ class AbstractRKNSplitting(AbstractRotorSplitting):
             # Row i: rotor a_i, then kick b_i, except after the last rotor (no kick: its torque is
             # skipped by a `lax.cond` on the row, which the particles share, so it stays a branch
             # under `vmap`). All fifteen rotors of SRKN14a in the loop: the first one outside it
-            # was a second rotor program, and its gradient compiled in 18 s (see the closing note).
+            # was a second rotor program (docs/performance.md, "One rotor program per RKN splitting").
             rows = np.stack(
                 [rotors, np.append(kicks, 0.0), np.cumsum(rotors), np.append(np.ones_like(kicks), 0.0)],
                 axis=1,

@@ -1,0 +1,67 @@
+"""`jaxrot._fit._optimiser.gauss_newton` on problems small enough to follow by hand.
+
+``r(z) = arctan(z)`` from ``z₀ = 3``: the full Gauss–Newton step ``−arctan(z)(1 + z²)`` overshoots
+to ``z ≈ −9.5`` (a larger objective), so Armijo's search halves it twice before accepting; then
+the iteration converges to the root ``z = 0``.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxrot._fit._optimiser import MAX_REJECTIONS, gauss_newton
+
+
+def arctan_residual(z, data):
+    return jnp.arctan(z)
+
+
+def arctan_with_aux(z, data):
+    """``(r, J, aux)``: ``aux`` records the point it was evaluated at."""
+    return jnp.arctan(z), jnp.diag(1 / (1 + z * z)), {"at": z}
+
+
+def fit(z0, max_iter=50, jacobian_fn=None, ftol=1e-12):
+    z0 = jnp.asarray(z0)
+    return gauss_newton(
+        arctan_residual, z0, None, jnp.asarray(ftol), jnp.asarray(0.0), max_iter, jacobian_fn=jacobian_fn
+    )
+
+
+def test_backtracks_then_converges_and_aux_belongs_to_the_returned_iterate():
+    z, history, n, converged, r, jac, aux = fit([3.0], jacobian_fn=arctan_with_aux)
+    assert bool(converged)
+    assert abs(float(z[0])) < 1e-12  # the root; each late step cubes the error
+    history = np.asarray(history[: int(n) + 1])
+    # The start, evaluated in the loop's first pass. XLA's and libm's arctan are each within an ulp
+    # or two, squared: 1e-15 relative.
+    np.testing.assert_allclose(history[0], np.arctan(3.0) ** 2, rtol=1e-15)
+    assert np.all(np.diff(history) < 0)  # every accepted step lowered the objective
+    # A rejected trial (the overshoot to z ≈ -9.5) never leaks into the returned values: they are
+    # those of z (to the rounding of another compiled arctan for r and J).
+    np.testing.assert_array_equal(aux["at"], z)
+    np.testing.assert_allclose(r, jnp.arctan(z), rtol=1e-15, atol=1e-300)
+    np.testing.assert_allclose(jac, jnp.diag(1 / (1 + z * z)), rtol=1e-15)
+
+
+def test_forward_mode_default_gives_the_same_iterates_and_no_aux():
+    own = fit([3.0], jacobian_fn=arctan_with_aux)
+    default = fit([3.0])
+    assert default[6] is None
+    np.testing.assert_array_equal(default[0], own[0])
+    np.testing.assert_array_equal(default[1], own[1])
+    assert int(default[2]) == int(own[2])
+
+
+def test_no_iterations_returns_the_start_and_its_objective():
+    z, history, n, converged, r, _, aux = fit([3.0], max_iter=0, jacobian_fn=arctan_with_aux)
+    assert int(n) == 0 and not bool(converged)
+    np.testing.assert_array_equal(z, [3.0])
+    np.testing.assert_array_equal(aux["at"], [3.0])
+    np.testing.assert_allclose(float(history[0]), np.arctan(3.0) ** 2, rtol=1e-15)
+
+
+def test_a_nan_start_stops_unconverged_after_the_rejections():
+    z, history, n, converged, *_ = fit([jnp.nan], jacobian_fn=arctan_with_aux)
+    assert int(n) == 0 and not bool(converged)
+    assert np.isnan(float(history[0]))
+    assert MAX_REJECTIONS > 0 and np.isnan(float(z[0]))
