@@ -25,7 +25,7 @@ from ._identify_model import (
     residuals_and_jacobian,
     unpack,
 )
-from ._initial import _linear_estimate, estimate_omega
+from ._initial import _linear_estimate, estimate_omega, rotate_np
 from ._optimiser import gauss_newton
 from ._parameterisation import cholesky_from_inertia
 from ._uncertainty import analyse, correlations, propagate
@@ -184,19 +184,10 @@ def _start_orientation(e):
     return np.array([1.0, 0, 0, 0])
 
 
-def _rotate_numpy(q, v):
-    """`jaxrot.quaternion.rotate` in NumPy (float64, leading axes broadcast), for the start estimates:
-    eager JAX dispatched ~30 single-op programs per call, each compiled on first use."""
-    q, v = np.asarray(q, np.float64), np.asarray(v, np.float64)
-    w, u = q[..., :1], q[..., 1:]
-    t = 2 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 def _start_omega(e, q_start):
     rows = _finite_rows(e.omega_body)
     if rows.size:
-        return _rotate_numpy(q_start, e.omega_body[rows[0]])
+        return rotate_np(q_start, np.asarray(e.omega_body[rows[0]], np.float64))
     rows = _finite_rows(e.q)
     if rows.size >= 3:
         return estimate_omega(e.t[rows[:3]], sign_continuous(e.q[rows[:3]]))[0]
@@ -399,7 +390,7 @@ def identify(
         q_rows = sign_continuous(e.q[rows])
         w_rows = _finite_rows(e.omega_body)
         if np.array_equal(w_rows, np.arange(e.t.shape[0])) and rows.size == e.t.shape[0]:
-            omega_world = _rotate_numpy(q_rows, e.omega_body)
+            omega_world = rotate_np(q_rows, np.asarray(e.omega_body, np.float64))
         else:
             omega_world = estimate_omega(e.t[rows], q_rows)
         start, momentum = _linear_estimate(
@@ -430,11 +421,11 @@ def identify(
         # ω₀ = R₀ I⁻¹ R₀ᵀ L₀ from the momentum fitted to all samples of that record: better than differences.
         if _finite_rows(experiments[best].q)[0] == 0:
             q_first = np.asarray(q_first, np.float64)
-            q_first_inverse = q_first * np.array([1.0, -1.0, -1.0, -1.0])
+            q_first_inverse = q_first * np.array([1.0, -1.0, -1.0, -1.0])  # the conjugate
             scaled = start * (trace0 / np.trace(start)) if unit_scale else start
             momentum = momentum * (trace0 / np.trace(start)) if unit_scale else momentum
-            body = np.linalg.solve(scaled, _rotate_numpy(q_first_inverse, momentum))
-            candidate = _rotate_numpy(q_first, body)
+            body = np.linalg.solve(scaled, rotate_np(q_first_inverse, momentum))
+            candidate = rotate_np(q_first, body)
             if np.all(np.isfinite(candidate)):
                 omega_starts[best] = candidate
     q_starts = _check_starts(q0, "q0", k, 4) if q0 is not None else q_starts
@@ -727,12 +718,14 @@ def _parameter_jacobians(phi, layout, q_start, free_inertia):
             parts.extend([dq[j], omega_fit[j]])
         return jnp.concatenate(parts)
 
+    def fitted_q0(dq):
+        return quat.multiply(quat.exp(dq), q_start)
+
     def all_values(phi):
         inertia, args_fit, dq, omega_fit = unpack(phi, layout)
-        q_fit = quat.multiply(quat.exp(dq), q_start)
+        q_fit = fitted_q0(dq)
         leaves = [jnp.ravel(leaf) for leaf in jax.tree_util.tree_leaves(args_fit)]
         return jnp.concatenate([inertia.ravel(), *leaves, q_fit.ravel(), omega_fit.ravel()])
 
     unpacked = unpack(phi, layout)
-    q_fit0 = quat.multiply(quat.exp(unpacked[2]), q_start)
-    return jax.jacfwd(user_values)(phi), jax.jacfwd(all_values)(phi), unpacked, q_fit0
+    return jax.jacfwd(user_values)(phi), jax.jacfwd(all_values)(phi), unpacked, fitted_q0(unpacked[2])

@@ -184,7 +184,6 @@ def gauss_newton(
     # 1.0 s and compiling 5.2 → 3.8 s; with the states riding along as ``aux`` (no program of their
     # own, 1.6 s) its first call went from 12.0 to 6.4 s (one run each, `jax_log_compiles`, at
     # 06a7bff; `benchmarks/identify_speed.py` has the current figure).
-    # Traced once, for the carry's shapes and for the loop's body (tracing the Jacobian is ~1 s).
     traced, shapes = jax.make_jaxpr(evaluate, return_shape=True)(z0)
     out_tree = jax.tree_util.tree_structure(shapes)
     r_shape, jac_shape, aux_shape = shapes
