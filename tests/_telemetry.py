@@ -31,6 +31,12 @@ def _interp(t, t_c, tau_c):
     return jax.vmap(lambda column: jnp.interp(t, t_c, column), in_axes=1)(tau_c)
 
 
+def _controlled_torque(t, q, omega, args):
+    """The dipole's torque plus the sampled control ``args["tau_c"]`` at ``args["t_c"]``: one torque
+    function for the three manoeuvres, so that their reference solves share one compiled program."""
+    return dipole_torque(t, q, omega, args) + _interp(t, args["t_c"], args["tau_c"])
+
+
 @functools.lru_cache(maxsize=4)
 def satellite_records(n=121, duration=600.0):
     """The three manoeuvres without noise: ``(t, q, omega_body, t_c, tau_c, q0, omega0)`` each.
@@ -48,15 +54,16 @@ def satellite_records(n=121, duration=600.0):
         # A world-frame control torque: the commanded dipole crossed with the field, sampled.
         tau_c = np.cross(commanded, np.asarray(jax.vmap(field)(jnp.asarray(t_c))))
 
-        def torque(tt, q, omega, args, t_c=t_c, tau_c=tau_c):
-            return dipole_torque(tt, q, omega, args) + _interp(tt, jnp.asarray(t_c), jnp.asarray(tau_c))
-
         ref = jaxrot.reference_rollout(
             jaxrot.RotState(q0, omega0),
             jnp.asarray(SATELLITE_INERTIA),
             jnp.asarray(t),
-            torque=torque,
-            args={"dipole": jnp.asarray(SATELLITE_DIPOLE)},
+            torque=_controlled_torque,
+            args={
+                "dipole": jnp.asarray(SATELLITE_DIPOLE),
+                "t_c": jnp.asarray(t_c),
+                "tau_c": jnp.asarray(tau_c),
+            },
         )
         omega_body = np.asarray(quat.rotate(quat.conjugate(ref.q), ref.omega))
         records.append((t, np.asarray(ref.q), omega_body, t_c, tau_c, np.asarray(q0), np.asarray(omega0)))
