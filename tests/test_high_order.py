@@ -309,7 +309,9 @@ def test_looped_stages_are_the_unrolled_stages(name):
     a, b = run(name, MOMENTS), run(looped, MOMENTS)
     np.testing.assert_allclose(b.q, a.q, rtol=0, atol=1e-12)
     np.testing.assert_allclose(b.omega, a.omega, rtol=0, atol=1e-12)
-    grad = jax.grad(lambda m: jnp.sum(run(looped, m).q[-1] * jnp.array([0.2, -0.4, 0.5, 0.7])))(MOMENTS)
+    grad = jax.jit(jax.grad(lambda m: jnp.sum(run(looped, m).q[-1] * jnp.array([0.2, -0.4, 0.5, 0.7]))))(
+        MOMENTS
+    )
     assert np.all(np.isfinite(grad)) and float(jnp.linalg.norm(grad)) > 0
 
 
@@ -338,8 +340,9 @@ def test_derivatives_run_through_the_looped_stages_and_values_stay_unrolled():
     final, unrolled = _looped_and_unrolled_final()
     forward = jax.jit(lambda scheme_name_or_object, m: final(scheme_name_or_object, m), static_argnums=0)
     assert float(forward("rkmk4", MOMENTS)) == float(forward(unrolled, MOMENTS))
-    new = jax.grad(lambda m: final("rkmk4", m))(MOMENTS)
-    old = jax.grad(lambda m: final(unrolled, m))(MOMENTS)
+    # Compiled, one program per derivative: eagerly each is a forward and a transposed program.
+    new = jax.jit(jax.grad(lambda m: final("rkmk4", m)))(MOMENTS)
+    old = jax.jit(jax.grad(lambda m: final(unrolled, m)))(MOMENTS)
     np.testing.assert_allclose(new, old, rtol=0, atol=1e-11)
     assert float(jnp.linalg.norm(new)) > 0
 
@@ -349,13 +352,13 @@ def test_forward_derivatives_and_closed_over_parameters_run_through_the_looped_s
     """As above for ``jax.jacfwd``; and a torque that closes over a traced parameter is
     closure-converted, so its derivative still flows (same tolerance, same argument)."""
     final, unrolled = _looped_and_unrolled_final()
-    new = jax.jacfwd(lambda m: final("rkmk4", m))(MOMENTS)
-    old = jax.jacfwd(lambda m: final(unrolled, m))(MOMENTS)
+    new = jax.jit(jax.jacfwd(lambda m: final("rkmk4", m)))(MOMENTS)
+    old = jax.jit(jax.jacfwd(lambda m: final(unrolled, m)))(MOMENTS)
     np.testing.assert_allclose(new, old, rtol=0, atol=1e-11)
     assert float(jnp.linalg.norm(new)) > 0
-    closed = jax.grad(lambda c: final("rkmk4", MOMENTS, c))(1.3)
+    closed = jax.jit(jax.grad(lambda c: final("rkmk4", MOMENTS, c)))(1.3)
     np.testing.assert_allclose(
-        closed, jax.grad(lambda c: final(unrolled, MOMENTS, c))(1.3), rtol=0, atol=1e-11
+        closed, jax.jit(jax.grad(lambda c: final(unrolled, MOMENTS, c)))(1.3), rtol=0, atol=1e-11
     )
     assert float(closed) != 0.0
 

@@ -175,7 +175,7 @@ def test_gradient_through_adaptive_solve_matches_central_differences():
         sol = _solve("rkmk_dopri5", STATE, moments, _drag_torque, 1.0, None, stepsize_controller=_pid(1e-11))
         return jnp.dot(weights, jnp.concatenate([sol.ys.q[-1], sol.ys.omega[-1]]))
 
-    grad = jax.grad(projected)(MOMENTS)
+    grad = jax.jit(jax.grad(projected))(MOMENTS)
     h = 1e-5
     fd = jnp.stack([(projected(MOMENTS + e) - projected(MOMENTS - e)) / (2 * h) for e in h * jnp.eye(3)])
     np.testing.assert_allclose(grad, fd, rtol=0, atol=1e-5)
@@ -228,7 +228,7 @@ def test_direct_adjoint_gives_the_default_adjoints_gradient():
             )  # fmt: skip  # 5 steps either way; DirectAdjoint's program grows with max_steps
             return jnp.sum(sol.ys.q[-1] * weights)
 
-        return jax.grad(loss)(STATE.omega)
+        return jax.jit(jax.grad(loss))(STATE.omega)
 
     for controller, dt0, atol in ((diffrax.ConstantStepSize(), 0.1, 1e-14), (_pid(tol), None, tol)):
         default = grad(diffrax.RecursiveCheckpointAdjoint(), controller, dt0)
