@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The GPU measurements of docs/performance.md ("On a GPU"), in one call of the lent machine.
+#
+#   OUT=/some/folder bash benchmarks/gpu.sh
+#
+# Runs from the repository root with the machine's own python3 (jax with CUDA, diffrax,
+# equinox, optax are in its image); jaxrot is imported from the checkout, and jax_md (not in the
+# image) from ./.gpu_site when that folder holds it (copy jax_md, jraph, ml_collections,
+# e3nn_jax and frozendict with their dist-info folders from a Python 3.12 site-packages).
+# Each step has its own time limit and writes its own file under $OUT, most important first, so a
+# call stopped early still returns what finished: throughput in float32 at 1e6 and 1e7 bodies
+# without `stage` barriers (GPU default) against jax_md, the race of the two scenes that miss 5x on
+# the CPU, then the same throughput with barriers. About 8.5 minutes.
+set -u
+: "${OUT:?set OUT to the folder for the results}"
+export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
+PY=${PYTHON:-python3}
+LOG="$OUT/gpu.log"
+step() {  # step SECONDS NAME COMMAND...
+    local limit=$1 name=$2
+    shift 2
+    echo "== $name (limit ${limit}s) $(date -u +%T)" | tee -a "$LOG"
+    local start=$SECONDS
+    timeout "$limit" "$@" 2>&1 | grep -v -E "^\s*$|it/s\]$" | tee -a "$LOG"
+    echo "== $name: exit ${PIPESTATUS[0]} after $((SECONDS - start)) s" | tee -a "$LOG"
+}
+nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem,memory.used,memory.total --format=csv | tee -a "$LOG"
+$PY -c "import jax, diffrax, jaxrot; print('jax', jax.__version__, jax.devices(), 'diffrax', diffrax.__version__)" 2>&1 | tee -a "$LOG"
+$PY -c "import jax_md; print('jax_md ok')" 2>&1 | tail -1 | tee -a "$LOG"
+
+# The second- and first-order schemes lose every race budget on the CPU by far; leaving them out
+# keeps each race inside its limit.
+RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a}
+TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
+RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
+step 120 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
+step 150 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
+step 150 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
+step 90 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
+ls -R "$OUT"
