@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The GPU measurements of docs/performance.md ("On a GPU"), in one call of the lent machine.
 #
-#   OUT=/some/folder bash benchmarks/gpu.sh
+#   OUT=/some/folder bash benchmarks/gpu.sh                      # every step: about 11 minutes
+#   OUT=/some/folder STEPS=throughput,race_viscous bash benchmarks/gpu.sh   # under one call's 10
 #
 # Runs from the repository root with the machine's own python3 (jax with CUDA, diffrax,
 # equinox, optax are in its image); jaxrot is imported from the checkout, and jax_md (not in the
@@ -9,16 +10,24 @@
 # e3nn_jax and frozendict with their dist-info folders from a Python 3.12 site-packages).
 # Each step has its own time limit and writes its own file under $OUT, most important first, so a
 # call stopped early still returns what finished: throughput in float32 at 1e6 and 1e7 bodies
-# without `stage` barriers (GPU default) against jax_md, the race of the two scenes that miss 5x on
-# the CPU, then the same throughput with barriers. About 8.5 minutes.
+# without `stage` barriers (GPU default) against jax_md (`throughput`), the race of the two scenes
+# that miss 5x on the CPU (`race_viscous`, `race_dipole`), then the same throughput with barriers
+# (`barriers`). Seen on an H200 (2026-11-26): throughput 102 s, a race about 200 s; a lent machine
+# allows 10 minutes per call, so run the steps in two calls (STEPS names those of one call).
 set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
+STEPS=",${STEPS:-throughput,race_viscous,race_dipole,barriers},"
+# jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 PY=${PYTHON:-python3}
+version=$($PY -c "import tomllib; print(tomllib.load(open('pyproject.toml', 'rb'))['project']['version'])")
+mkdir -p ".gpu_site/jaxrot-$version.dist-info"
+printf 'Metadata-Version: 2.1\nName: jaxrot\nVersion: %s\n' "$version" >".gpu_site/jaxrot-$version.dist-info/METADATA"
 LOG="$OUT/gpu.log"
-step() {  # step SECONDS NAME COMMAND...
-    local limit=$1 name=$2
-    shift 2
+step() {  # step KEY SECONDS NAME COMMAND...: runs when STEPS names KEY
+    local key=$1 limit=$2 name=$3
+    shift 3
+    [[ $STEPS == *",$key,"* ]] || return 0
     echo "== $name (limit ${limit}s) $(date -u +%T)" | tee -a "$LOG"
     local start=$SECONDS
     timeout "$limit" "$@" 2>&1 | grep -v -E "^\s*$|it/s\]$" | tee -a "$LOG"
@@ -33,8 +42,8 @@ $PY -c "import jax_md; print('jax_md ok')" 2>&1 | tail -1 | tee -a "$LOG"
 RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a}
 TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
 RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
-step 120 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
-step 150 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
-step 150 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
-step 90 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
+step throughput 150 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
+step race_viscous 260 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
+step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
+step barriers 150 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
 ls -R "$OUT"

@@ -26,11 +26,17 @@ fastest jaxrot row and the fastest diffrax row meeting it and their ratio
 
     python benchmarks/race.py                                  # the three race scenes, float64
     python benchmarks/race.py --scenes heavy_top --dtype float32 --n 1000
+
+A race stopped before its side-by-side re-timing (a time limit on a lent GPU) still printed every
+ladder row; ``--from-log LOG`` rebuilds the table of each scene in LOG from those first-pass
+timings (each row timed minutes apart from the others) and writes it with ``"retimed": false``.
 """
 
 import argparse
+import ast
 import json
 import math
+import re
 import statistics
 import time
 from pathlib import Path
@@ -327,6 +333,49 @@ def format_race(scene_name, dtype, table):
     return "\n".join(lines)
 
 
+_LADDER_ROW = re.compile(
+    r"^  (?P<method>\S+)\s+(?:steps\s+(?P<steps>\d+)|tol\s+(?P<tol>\S+)\s+steps\s+(?P<mean>\S+))"
+    r"\s+err\s+(?P<err>\S+)\s+(?P<ms>\S+) ms$"
+)
+
+
+def rows_from_log(lines):
+    """``{scene: rows}`` of the ladder lines that `race` logged (error and first-pass time only)."""
+    scenes, rows = {}, None
+    for line in lines:
+        if line.startswith("== ") and "N = " in line:
+            rows = scenes.setdefault(line[3:].split(" (")[0], [])
+        elif rows is not None and (match := _LADDER_ROW.match(line.rstrip("\n"))):
+            fixed = match["steps"] is not None
+            rows.append(
+                {"method": match["method"], "kind": "fixed" if fixed else "adaptive",
+                 "tol": None if fixed else float(match["tol"]),
+                 "n_steps": int(match["steps"]) if fixed else int(round(float(match["mean"]))),
+                 "max_orientation_error_rad": float(match["err"]), "seconds": float(match["ms"]) / 1e3}
+            )  # fmt: skip
+    return scenes
+
+
+def table_from_log(log_path, dtype, out):
+    """Print and write (``out/race_DTYPE_firstpass.json``) the race tables rebuilt from a log."""
+    lines = Path(log_path).read_text().splitlines()
+    prefix = "machine: "
+    machine = next(ast.literal_eval(line[len(prefix) :]) for line in lines if line.startswith(prefix))
+    report = {"machine": machine, "source": str(log_path), "retimed": False, "scenes": {}}
+    for scene_name, rows in rows_from_log(lines).items():
+        table = race_table(rows, BUDGETS[dtype])
+        print(format_race(scene_name, dtype, table) + "\n(first-pass timings, not re-timed side by side)")
+        report["scenes"][scene_name] = {
+            "rows": rows,
+            "table": [
+                {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
+                for b, o, d, r in table
+            ],
+        }
+    with open(Path(out) / f"race_{dtype}_firstpass.json", "w") as f:
+        json.dump(report, f, indent=2)
+
+
 def main():
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -341,7 +390,12 @@ def main():
     parser.add_argument(
         "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
     )
+    parser.add_argument("--from-log", default=None, help="rebuild the tables from this race log and stop")
     opts = parser.parse_args()
+    if opts.from_log:
+        Path(opts.out).mkdir(parents=True, exist_ok=True)
+        table_from_log(opts.from_log, opts.dtype, opts.out)
+        return
     jaxrot._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[opts.barriers]
     out = Path(opts.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -11,8 +11,9 @@ another in fresh processes, so that nothing else competes for the cores while on
     python benchmarks/regenerate.py --quick             # all but the long ones (races, compile, compare)
     python benchmarks/regenerate.py --only memory,stability
 
-The GPU results under ``docs/gpu_h100/`` need a GPU machine and are made there by hand with the
-commands of docs/performance.md ("On a GPU"). The ``jax_md`` column of the throughput table needs
+The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machine: the first were
+made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
+``benchmarks/gpu.sh``. The ``jax_md`` column of the throughput table needs
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
 left out. Run from the repository root with a clean checkout: a results file made from uncommitted
 package or benchmark code carries ``+dirty`` in its commit.

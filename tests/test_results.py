@@ -36,6 +36,13 @@ RESULTS = {
     "race_cpu/race_float32.json": ("method", "python benchmarks/regenerate.py --only race32"),
     "gpu_h100/race_heavy_top_float64.json": ("method", "python benchmarks/race.py (on the GPU)"),
     "gpu_h100/tp_f32_1000000.json": ("method", "python benchmarks/throughput.py (on the GPU)"),
+    "gpu_h200/tp_f32_nobar_jax_md.json": ("method", "OUT=... STEPS=throughput bash benchmarks/gpu.sh"),
+    # The GPU races leave out the first- and second-order schemes (benchmarks/gpu.sh): not every scheme.
+    "gpu_h200/race_dipole_rotating_field_float64.json": (None, "STEPS=race_dipole bash benchmarks/gpu.sh"),
+    "gpu_h200/race_viscous_drag_float64_firstpass.json": (
+        None,
+        "STEPS=race_viscous bash benchmarks/gpu.sh, or benchmarks/race.py --from-log on its log",
+    ),
 }
 
 

@@ -2,7 +2,7 @@
 
 A page writes ``{{ name }}`` of a table in `TABLES` on a line of its own; the hook replaces it
 with a Markdown table built from ``docs/throughput_cpu.json``, ``docs/memory_cpu.json``,
-``docs/compare_heavy_top.json`` or the GPU results under ``docs/gpu_h100/``,
+``docs/compare_heavy_top.json`` or the GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/``,
 so the pages show exactly what the benchmarks wrote.
 """
 
@@ -218,18 +218,54 @@ def gpu_throughput_table(docs):
     return "\n".join(lines)
 
 
-def gpu_race_table(docs):
-    """The heavy-top race on the H100, from docs/gpu_h100/race_heavy_top_float64.json."""
-    data = _read(docs, "gpu_h100/race_heavy_top_float64.json")
+def gpu_race_table(docs, name="gpu_h100/race_heavy_top_float64.json"):
+    """A race on a lent GPU, one table per scene, from ``docs/name`` (`benchmarks/race.py`'s json, or
+    its ``--from-log`` rebuild, flagged as first-pass timings)."""
+    data = _read(docs, name)
+    lines = []
+    for scene, result in data["scenes"].items():
+        lines += [
+            f"| {scene}: budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
+            "|---|---|---|---|",
+        ]
+        for row in result["table"]:
+            ratio = "—" if row["ratio"] is None else f"{row['ratio']:.2f}"
+            lines.append(f"| {row['budget']:.0e} | {row['jaxrot']} | {row['diffrax'] or 'none'} | {ratio} |")
+        lines.append("")
+    if data.get("retimed", True):
+        m = data["machine"]
+        lines.append(f"*From `docs/{name}`: {m['device']}, jax {m['jax']}.*")
+    else:
+        lines.append(
+            f"*From `docs/{name}`, rebuilt from the log `{data['source']}` of a run stopped before its "
+            "side-by-side re-timing: first-pass timings, each row timed apart from the others.*"
+        )
+    return "\n".join(lines)
+
+
+def gpu_peer_throughput_table(docs, name="gpu_h200/tp_f32_nobar_jax_md.json"):
+    """M particle-steps/s of every scheme and jax_md on a lent GPU, and the ratio over jax_md."""
+    data = _read(docs, name)
+    methods = list(dict.fromkeys(r["method"] for r in data["rows"]))
     lines = [
-        "| budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
-        "|---|---|---|---|",
+        "| dtype | N | steps | " + " | ".join(methods) + " |",
+        "|" + "---|" * (len(methods) + 3),
     ]
-    for row in data["scenes"]["heavy_top"]["table"]:
-        ratio = "—" if row["ratio"] is None else f"{row['ratio']:.2f}"
-        lines.append(f"| {row['budget']:.0e} | {row['jaxrot']} | {row['diffrax'] or 'none'} | {ratio} |")
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in data["rows"]):
+        by = {r["method"]: r for r in data["rows"] if (r["dtype"], r["n"]) == (dtype, n)}
+        base = by["jax_md"]["particle_steps_per_s"]
+        cells = [
+            f"{by[m]['particle_steps_per_s'] / 1e6:.3g}"
+            + ("" if m == "jax_md" else f" ({by[m]['particle_steps_per_s'] / base:.2f}×)")
+            for m in methods
+        ]
+        steps = next(iter(by.values()))["steps"]
+        lines.append(f"| {dtype} | {_power_of_ten(n)} | {steps} | " + " | ".join(cells) + " |")
     m = data["machine"]
-    lines.append(f"\n*From `docs/gpu_h100/race_heavy_top_float64.json`: {m['device']}, jax {m['jax']}.*")
+    lines.append(
+        f"\n*From `docs/{name}`: {m['device']}, Python {m['python']}, jax {m['jax']}, "
+        f"jax_md {m['jax_md']}, stage barriers {'on' if m['stage_barriers'] else 'off'}.*"
+    )
     return "\n".join(lines)
 
 
@@ -635,6 +671,7 @@ TABLES = {
     "compare_orders": compare_orders,
     "gpu_throughput_table": gpu_throughput_table,
     "gpu_race_table": gpu_race_table,
+    "gpu_peer_throughput_table": gpu_peer_throughput_table,
     "race_table_float64": race_table_float64,
     "race_table_float32": race_table_float32,
     "race_summary": race_summary,
