@@ -1,5 +1,6 @@
 """Test configuration, in the style of diffrax/equinox: float64 on, strict promotion."""
 
+import importlib.metadata
 import os
 
 
@@ -8,9 +9,17 @@ import os
 # seconds and run in milliseconds), and -O0 cut the compile-bound tests' time by 10-30 % (measured on
 # tests/test_rotor.py, tests/test_zhao.py and a fit); the programs' semantics, hence every tolerance,
 # are the same at any optimisation level.
-os.environ.setdefault(
-    "XLA_FLAGS", "--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0"
-)
+_XLA_FLAGS = "--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0"
+# And XLA:CPU's older loop emitters instead of its fusion emitters, where jaxlib still has them
+# (0.10; 0.12 has only the fusion emitters and rejects the flag): they compile faster (measured on
+# jaxlib 0.10.2, 2 cores: the default set 4:51 -> 3:15; tests/test_identify.py's per-experiment
+# Jacobian test 10.4 -> 6.9 s) and evaluate the same operations, but fuse them differently, so two
+# programs that round alike under the default emitters may not here: tests of a bit-for-bit promise
+# take the `default_emitters` fixture.
+_LEGACY_EMITTERS = tuple(int(p) for p in importlib.metadata.version("jaxlib").split(".")[:2]) < (0, 11)
+if _LEGACY_EMITTERS:
+    _XLA_FLAGS += " --xla_cpu_use_fusion_emitters=false"
+os.environ.setdefault("XLA_FLAGS", _XLA_FLAGS)
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
@@ -70,3 +79,19 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.nodeid.startswith(SLOW_ITEMS):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture
+def default_emitters(monkeypatch):
+    """jaxrot's own programs compile with XLA's default (fusion) emitters in this test.
+
+    A bit-for-bit promise (a blocked run equals the unblocked one; a user's ``jax.jit`` with
+    `jaxrot.compiler_options` equals jaxrot's top-level call) is about the programs users compile.
+    The suite's flag for faster compiles (above) turns those emitters off; a compiler option, which
+    jaxrot adds to every program it compiles at top level, turns them back on for one test. A user's
+    own ``jax.jit`` in such a test passes `jaxrot.compiler_options()`, which then carries it too.
+    """
+    if "--xla_cpu_use_fusion_emitters=false" in os.environ.get("XLA_FLAGS", ""):
+        import jaxrot._compile
+
+        monkeypatch.setitem(jaxrot._compile._CPU_OPTIONS, "xla_cpu_use_fusion_emitters", True)

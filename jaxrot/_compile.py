@@ -57,9 +57,10 @@ def filter_jit(fun):
     def call(*args, **kwargs):
         if not _outside_any_trace():
             return plain(*args, **kwargs)
-        backend = jax.default_backend()
-        if backend not in with_options:
-            with_options[backend] = eqx.filter_jit(fun, compiler_options=compiler_options(backend))
-        return with_options[backend](*args, **kwargs)
+        options = compiler_options()
+        key = tuple(sorted(options.items()))  # the options of this call's backend
+        if key not in with_options:
+            with_options[key] = eqx.filter_jit(fun, compiler_options=options)
+        return with_options[key](*args, **kwargs)
 
     return call

@@ -52,7 +52,7 @@ def blocking_cases():
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
 @pytest.mark.parametrize("n, scheme", blocking_cases())
-def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch):
+def test_blocked_rollout_is_bit_identical(scheme, dtype, n, monkeypatch, default_emitters):
     # Per-body args, per-particle inertia, a drive, the runtime check and the carry all blocked.
     state, _, dt, kwargs = driven_problem(dtype, n)
     inertia = jnp.broadcast_to(MOMENTS.astype(dtype), (n, 3)) * jnp.linspace(1, 2, n, dtype=dtype)[:, None]

@@ -29,7 +29,7 @@ def concatenate(chunks):
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
 @pytest.mark.parametrize("scheme", contract_params())
-def test_chunks_concatenate_to_one_call_bit_for_bit(scheme, dtype):
+def test_chunks_concatenate_to_one_call_bit_for_bit(scheme, dtype, default_emitters):
     state, inertia, dt, kwargs = problem(dtype)
     setup, chunk_steps, lengths, steps = SETUPS[dtype]
     one, carry = jaxrot.rollout(scheme, state, inertia, dt, **setup, **kwargs, return_carry=True)

@@ -55,7 +55,7 @@ def test_rollout_compiles_through_jaxrot_filter_jit():
     assert _run._rollout_flat.__code__ is _compile.filter_jit(lambda: None).__code__
 
 
-def test_rollout_under_a_user_jit_with_the_options_equals_the_top_level_call():
+def test_rollout_under_a_user_jit_with_the_options_equals_the_top_level_call(default_emitters):
     state = jaxrot.RotState(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, -1.0, 2.0]))
     inertia = jnp.array([1.0, 2.0, 3.0])
 

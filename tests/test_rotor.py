@@ -226,7 +226,9 @@ def test_any_turn_up_to_ten_rad(body, dtype):
     q, w = _states(8, seed=5)
     turns = np.repeat(FAST_TURNS, 2)
     w = w * turns[:, None]
-    exact = jax.vmap(analytic.free_motion, (0, 0, None, None))(jnp.asarray(q), jnp.asarray(w), moments, 1.0)
+    # Compiled: eagerly, each of the oracle's operations compiled a program of its own (10.5 -> 5.2 s).
+    exact_flow = jax.jit(jax.vmap(analytic.free_motion, (0, 0, None, None)))
+    exact = exact_flow(jnp.asarray(q), jnp.asarray(w), moments, 1.0)
     args = (jnp.asarray(q, dtype), jnp.asarray(w, dtype), moments.astype(dtype), jnp.asarray(1.0, dtype))
     got = jax.jit(free_rotor)(*args)
     assert got[0].dtype == dtype

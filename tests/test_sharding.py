@@ -45,7 +45,7 @@ def sharded_inputs(state, inertia, kwargs, m):
 
 @pytest.mark.parametrize("axis_type", [AxisType.Explicit, AxisType.Auto])
 @pytest.mark.parametrize("scheme", contract_params())
-def test_sharded_rollout_equals_one_device_and_keeps_the_layout(scheme, axis_type):
+def test_sharded_rollout_equals_one_device_and_keeps_the_layout(scheme, axis_type, default_emitters):
     state, inertia, dt, kwargs = problem(16)
     one = jaxrot.rollout(scheme, state, inertia, dt, **kwargs)
     m = mesh(axis_type)
