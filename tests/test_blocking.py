@@ -79,10 +79,12 @@ def test_blocked_chunks_and_gradients_match_unblocked(tiny_blocks):
         traj = jaxrot.rollout("zhao", state, moments, dt, 20, **kwargs, chunk_steps=8 if blocked else None)
         return jnp.sum(quat.angle_between(traj.q[-1], state.q))
 
-    # Compiled (a block size is read when the rollout is traced: each call traces anew).
-    value, grad = jax.jit(jax.value_and_grad(final_angle), static_argnums=1)(inertia, True)
+    # Compiled; the block size is read when the rollout is traced, and each value of the static
+    # `blocked` traces anew.
+    run = jax.jit(jax.value_and_grad(final_angle), static_argnums=1)
+    value, grad = run(inertia, True)
     _blocking.BLOCK_BODIES = 1 << 30  # restored by the fixture
-    value1, grad1 = jax.jit(jax.value_and_grad(final_angle), static_argnums=1)(inertia, False)
+    value1, grad1 = run(inertia, False)
     assert np.all(np.isfinite(grad))
     np.testing.assert_array_equal(value, value1)
     # The gradient of the shared inertia sums over bodies, block by block: another order of the sum.
