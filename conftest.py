@@ -12,13 +12,13 @@ import os
 _XLA_FLAGS = "--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0"
 # And XLA:CPU's older loop emitters instead of its fusion emitters, where jaxlib still has them
 # (0.10; 0.12 has only the fusion emitters and rejects the flag): they compile faster (measured on
-# jaxlib 0.10.2, 2 cores: the default set 4:51 -> 3:15; tests/test_identify.py's per-experiment
+# jaxlib 0.10.2, 2 cores: the default set 4:51 -> 2:38; tests/test_identify.py's per-experiment
 # Jacobian test 10.4 -> 6.9 s) and evaluate the same operations, but fuse them differently, so two
 # programs that round alike under the default emitters may not here: tests of a bit-for-bit promise
 # take the `default_emitters` fixture.
-_LEGACY_EMITTERS = tuple(int(p) for p in importlib.metadata.version("jaxlib").split(".")[:2]) < (0, 11)
-if _LEGACY_EMITTERS:
-    _XLA_FLAGS += " --xla_cpu_use_fusion_emitters=false"
+_LOOP_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
+if tuple(int(p) for p in importlib.metadata.version("jaxlib").split(".")[:2]) < (0, 11):
+    _XLA_FLAGS += " " + _LOOP_EMITTERS
 os.environ.setdefault("XLA_FLAGS", _XLA_FLAGS)
 
 import jax  # noqa: E402
@@ -91,7 +91,7 @@ def default_emitters(monkeypatch):
     jaxrot adds to every program it compiles at top level, turns them back on for one test. A user's
     own ``jax.jit`` in such a test passes `jaxrot.compiler_options()`, which then carries it too.
     """
-    if "--xla_cpu_use_fusion_emitters=false" in os.environ.get("XLA_FLAGS", ""):
+    if _LOOP_EMITTERS in os.environ.get("XLA_FLAGS", "").split():
         import jaxrot._compile
 
         monkeypatch.setitem(jaxrot._compile._CPU_OPTIONS, "xla_cpu_use_fusion_emitters", True)

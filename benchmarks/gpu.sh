@@ -18,8 +18,8 @@ set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
 STEPS=",${STEPS:-throughput,race_viscous,race_dipole,barriers},"
-# jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 PY=${PYTHON:-python3}
+# jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 version=$($PY -c "import tomllib; print(tomllib.load(open('pyproject.toml', 'rb'))['project']['version'])")
 mkdir -p ".gpu_site/jaxrot-$version.dist-info"
 printf 'Metadata-Version: 2.1\nName: jaxrot\nVersion: %s\n' "$version" >".gpu_site/jaxrot-$version.dist-info/METADATA"

@@ -321,6 +321,14 @@ def _label(row):
     return f"{row['method']} {setting} {row['seconds'] * 1e3:.3g} ms"
 
 
+def _table_json(table):
+    """`race_table`'s rows as the results file stores them (rows named by `_label`)."""
+    return [
+        {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
+        for b, o, d, r in table
+    ]
+
+
 def format_race(scene_name, dtype, table):
     lines = [
         f"### {scene_name}, {dtype}",
@@ -345,7 +353,7 @@ def rows_from_log(lines):
     for line in lines:
         if line.startswith("== ") and "N = " in line:
             rows = scenes.setdefault(line[3:].split(" (")[0], [])
-        elif rows is not None and (match := _LADDER_ROW.match(line.rstrip("\n"))):
+        elif rows is not None and (match := _LADDER_ROW.match(line)):
             fixed = match["steps"] is not None
             rows.append(
                 {"method": match["method"], "kind": "fixed" if fixed else "adaptive",
@@ -365,13 +373,7 @@ def table_from_log(log_path, dtype, out):
     for scene_name, rows in rows_from_log(lines).items():
         table = race_table(rows, BUDGETS[dtype])
         print(format_race(scene_name, dtype, table) + "\n(first-pass timings, not re-timed side by side)")
-        report["scenes"][scene_name] = {
-            "rows": rows,
-            "table": [
-                {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
-                for b, o, d, r in table
-            ],
-        }
+        report["scenes"][scene_name] = {"rows": rows, "table": _table_json(table)}
     with open(Path(out) / f"race_{dtype}_firstpass.json", "w") as f:
         json.dump(report, f, indent=2)
 
@@ -414,10 +416,7 @@ def main():
         plot_work_precision(rows, out / f"{stem}.png")
         report["scenes"][scene_name] = {
             "rows": [{k: v for k, v in r.items() if k != RERUN} for r in rows],
-            "table": [
-                {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
-                for b, o, d, r in table
-            ],
+            "table": _table_json(table),
         }
         with open(out / f"race_{opts.dtype}.json", "w") as f:
             json.dump(report, f, indent=2)
