@@ -10,14 +10,16 @@
 # e3nn_jax and frozendict with their dist-info folders from a Python 3.12 site-packages).
 # Each step has its own time limit and writes its own file under $OUT, most important first, so a
 # call stopped early still returns what finished: throughput in float32 at 1e6 and 1e7 bodies
-# without `stage` barriers (GPU default) against jax_md (`throughput`), the race of the two scenes
+# without `stage` barriers (GPU default) against jax_md (`throughput`), the rotor's while loop
+# with 1, 2, 4 and 8 DMV steps per iteration, without and with XLA's command buffers (`rotor_loop`,
+# `command_buffers`), the race of the two scenes
 # that miss 5x on the CPU (`race_viscous`, `race_dipole`), then the same throughput with barriers
 # (`barriers`). Seen on an H200 (2026-11-26): throughput 102 s, a race about 200 s; a lent machine
 # allows 10 minutes per call, so run the steps in two calls (STEPS names those of one call).
 set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
-STEPS=",${STEPS:-throughput,race_viscous,race_dipole,barriers},"
+STEPS=",${STEPS:-throughput,rotor_loop,command_buffers,race_viscous,race_dipole,barriers},"
 PY=${PYTHON:-python3}
 # jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 version=$($PY -c "import tomllib; print(tomllib.load(open('pyproject.toml', 'rb'))['project']['version'])")
@@ -43,6 +45,10 @@ RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8
 TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
 RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
 step throughput 150 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
+step rotor_loop 200 "rotor loop batch" $PY benchmarks/rotor_loop.py --fixed-substeps 2 --json "$OUT/rotor_loop.json"
+# The same with XLA's CUDA-graph command buffers holding while loops and conditionals (a user's flag).
+step command_buffers 120 "rotor loop batch, command buffers" env XLA_FLAGS=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL \
+    $PY benchmarks/rotor_loop.py --batches 1,4 --fixed-substeps 2 --json "$OUT/rotor_loop_cmdbuf.json"
 step race_viscous 260 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
 step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
 step barriers 150 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from jaxrot import analytic, quaternion as quat
+from jaxrot._free_body import _rotor
 from jaxrot._free_body._rotor import free_rotor, substeps_for
 
 
@@ -97,11 +98,13 @@ def test_matches_exact_motion_to_round_off():
     assert np.all(angle < bound) and np.all(omega < bound), (angle.max(), omega.max())
 
 
-def _bound(turn):
-    """The error bound at ``|ω| |t| = turn``: ``n = max(2, ⌈turn / 0.2⌉)`` DMV10 steps (`substeps_for`),
-    each within the one-step truncation bound of the order test below (1e-8 at 0.6 rad, slope 11)
-    and adding round-off (the 1e-13 of two steps, measured in both solutions, per two steps)."""
+def _bound(turn, loop_batch=1):
+    """The error bound at ``|ω| |t| = turn``: ``n = max(2, ⌈turn / 0.2⌉)`` DMV10 steps (`substeps_for`;
+    with ``loop_batch`` k, ``n − 2`` rounded up to a multiple of k), each within the one-step
+    truncation bound of the order test below (1e-8 at 0.6 rad, slope 11) and adding round-off (the
+    1e-13 of two steps, measured in both solutions, per two steps)."""
     n = np.maximum(2, np.ceil(np.asarray(turn) / 0.2))
+    n = 2 + np.ceil((n - 2) / loop_batch) * loop_batch
     return 1e-13 * n / 2 + n * 1e-8 * (turn / n / 0.6) ** 11
 
 
@@ -242,12 +245,40 @@ def test_any_turn_up_to_ten_rad(body, dtype):
     assert np.all(angle < bound) and np.all(omega / turns < bound), (angle, omega / turns, bound)
 
 
+def test_gpu_loop_form_any_turn(monkeypatch):
+    """The while loop as traced for a GPU (`_rotor.LOOP_BATCH` = 8 DMV steps per iteration, each
+    body's steps past the first two rounded up to a multiple of 8) is exact to round-off at every
+    turn up to 10 rad, float64 (`_bound` with the rounded counts), and its steps are the CPU form's
+    (same results where the counts agree: ``|ω| t <= 0.4`` and 2 + 8 steps at 2 rad, 10 steps)."""
+    monkeypatch.setattr(_rotor, "LOOP_BATCH", 8)
+    moments = jnp.asarray(FAST_BODIES["generic"])
+    q, w = _states(8, seed=5)
+    turns = np.array([0.3, 0.4, 2.0, 3.15, 6.0, 10.0, 1.0, 2.0])
+    w = jnp.asarray(w * turns[:, None])
+    # Traced afresh (free_rotor's own jit would reuse its CPU-form trace).
+    got = jax.jit(_rotor.free_rotor.__wrapped__)(jnp.asarray(q), w, moments, 1.0)
+    exact = jax.jit(jax.vmap(analytic.free_motion, (0, 0, None, None)))(jnp.asarray(q), w, moments, 1.0)
+    angle, omega = _errors(got, exact)
+    bound = _bound(turns, loop_batch=8)
+    assert np.all(angle < bound) and np.all(omega / turns < bound), (angle, omega / turns, bound)
+    same = np.isin(turns, (0.3, 0.4, 2.0))
+    cpu_form = jax.jit(_rotor.free_rotor.__wrapped__, static_argnames="substeps")
+    for k in np.flatnonzero(same):
+        n = 2 if turns[k] <= 0.4 else 10
+        expected = cpu_form(jnp.asarray(q[k]), w[k], moments, 1.0, substeps=n)
+        # The same DMV steps, but the fixed count runs h = t/n on m (the rule: t/2 on (2/n) m).
+        np.testing.assert_allclose(got[0][k], expected[0], rtol=0, atol=1e-14)
+
+
 @pytest.mark.slow
-def test_gradients_beyond_the_first_steps():
+@pytest.mark.parametrize("loop_batch", [1, 4])
+def test_gradients_beyond_the_first_steps(monkeypatch, loop_batch):
     """The extra steps' derivative rule (a carried Jacobian) agrees with the exact solution's
-    derivatives in the moments, ω and t, in reverse and forward mode, at 3 rad per flow (15 steps).
-    Tolerance: the values agree to ~1e-13 (`_bound`); derivatives amplify the difference by the
-    flow's sensitivity (~turn² here): 1e-9."""
+    derivatives in the moments, ω and t, in reverse and forward mode, at 3 rad per flow (15 steps;
+    with 4 steps per loop iteration, the GPU form, 18). Tolerance: the values agree to ~1e-13
+    (`_bound`); derivatives amplify the difference by the flow's sensitivity (~turn² here): 1e-9."""
+    monkeypatch.setattr(_rotor, "LOOP_BATCH", loop_batch)
+    free_rotor = jax.jit(_rotor.free_rotor.__wrapped__)  # traced afresh, with this loop form
     q0 = jnp.asarray(_states(1, seed=9)[0][0])
 
     def loss(fn):

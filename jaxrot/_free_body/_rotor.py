@@ -107,6 +107,22 @@ _NEWTON = 2
 _MAX_ROUNDING = 1e-12
 _MAX_ROUNDING_ULP = 100
 _SCAN = True
+LOOP_BATCH = None
+"""DMV steps per iteration of the rotor's while loop: ``None`` (default) is 1 when tracing for CPU
+and `_GPU_LOOP_BATCH` otherwise; an int sets it. Private: benchmarks set it before anything is
+traced, in a process of their own. On a GPU each while iteration is a few kernel launches and a
+host read of the loop predicate, so with long flows (a race's few long steps) the rotor's cost is
+that latency times the iterations, whatever the batch size; taking k steps per iteration divides
+it by k. Each body's count beyond the first two steps is then rounded up to a multiple of k
+(more, shorter DMV steps: never less accurate). On the CPU a body's extra steps cost compute, so
+there it stays 1."""
+_GPU_LOOP_BATCH = 4
+
+
+def _loop_batch() -> int:
+    if LOOP_BATCH is not None:
+        return LOOP_BATCH
+    return 1 if jax.default_backend() == "cpu" else _GPU_LOOP_BATCH
 
 
 def _modification(moments, x, y):
@@ -342,16 +358,22 @@ def _split(a):
     return tuple(a[..., k] for k in range(a.shape[-1]))
 
 
-def _repeat(s, n, step):
-    """``step`` applied ``n`` times (one body: ``n`` a scalar) to the arrays ``s``.
+def _repeat(s, n, step, batch=1):
+    """``step`` applied ``n`` times (one body: ``n`` a scalar, a multiple of ``batch``) to the arrays ``s``.
 
     Written for one body so that under `jax.vmap` JAX's own rule runs the loop while any body needs
     it and keeps each body's carry once it is done: no select of ours on top (measured: a masked
-    loop over the batch put the carry in an interleaved layout, +10-25% per rotor call).
+    loop over the batch put the carry in an interleaved layout, +10-25% per rotor call). Each
+    iteration applies ``step`` ``batch`` times (`LOOP_BATCH`).
     """
-    return lax.while_loop(lambda c: c[0] < n, lambda c: (c[0] + 1, step(c[1])), (jnp.zeros((), n.dtype), s))[
-        1
-    ]
+
+    def body(c):
+        s = c[1]
+        for _ in range(batch):
+            s = lax.optimization_barrier(step(s))
+        return c[0] + batch, s
+
+    return lax.while_loop(lambda c: c[0] < n, body, (jnp.zeros((), n.dtype), s))[1]
 
 
 def _per_body(fn, batch, *args):
@@ -403,7 +425,7 @@ def _dmv_steps(q, m, p, fad, h, n):
     a value: the tangent is the static steps' derivative followed by a product with that Jacobian,
     which reverse mode can transpose.
     """
-    q, m = _repeat(_first_steps(q, m, p, fad, h), n - _MIN_SUBSTEPS, _stacked_step(p, fad, h))
+    q, m = _repeat(_first_steps(q, m, p, fad, h), n - _MIN_SUBSTEPS, _stacked_step(p, fad, h), _loop_batch())
     return _split(q), _split(m)
 
 
@@ -433,7 +455,9 @@ def _dmv_steps_jvp(primals, tangents):
         jac = d[:, :n_s] @ jac + jnp.concatenate([jnp.zeros_like(d[:, :n_s]), d[:, n_s:]], axis=1)
         return state, jac
 
-    state, jac = _repeat((state, jnp.eye(n_s, size, dtype=state.dtype)), n - _MIN_SUBSTEPS, step)
+    state, jac = _repeat(
+        (state, jnp.eye(n_s, size, dtype=state.dtype)), n - _MIN_SUBSTEPS, step, _loop_batch()
+    )
     d_state = jac @ z_tangent
     return (_split(state[:4]), _split(state[4:])), (_split(d_state[:4]), _split(d_state[4:]))
 
@@ -510,6 +534,9 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         # scaled back: the flow, and the DMV map (a function of h m), are invariant under h → h/k,
         # m → k m. So h stays a scalar and only m and its invariants are scaled, per body.
         count = substeps_for(total_angle, dtype)
+        k = _loop_batch()
+        if k > 1:  # the while loop's steps a multiple of the steps per iteration (never fewer)
+            count = _MIN_SUBSTEPS + (count - _MIN_SUBSTEPS + k - 1) // k * k
         n_ref = _MIN_SUBSTEPS
         scale = n_ref / count.astype(dtype)
         m = tuple(mi * scale for mi in m)
