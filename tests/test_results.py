@@ -39,6 +39,9 @@ RESULTS = {
     "gpu_h200/tp_f32_nobar_jax_md.json": ("method", "OUT=... STEPS=throughput bash benchmarks/gpu.sh"),
     # The GPU races leave out the first- and second-order schemes (benchmarks/gpu.sh): not every scheme.
     "gpu_h200/race_dipole_rotating_field_float64.json": (None, "STEPS=race_dipole bash benchmarks/gpu.sh"),
+    # The rotor schemes only, under each setting of the rotor's while loop.
+    "gpu_h200/rotor_loop.json": (None, "STEPS=rotor_loop bash benchmarks/gpu.sh"),
+    "gpu_h200/rotor_loop_cmdbuf.json": (None, "STEPS=command_buffers bash benchmarks/gpu.sh"),
     "gpu_h200/race_viscous_drag_float64_firstpass.json": (
         None,
         "STEPS=race_viscous bash benchmarks/gpu.sh, or benchmarks/race.py --from-log on its log",

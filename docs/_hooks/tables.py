@@ -269,6 +269,29 @@ def gpu_peer_throughput_table(docs, name="gpu_h200/tp_f32_nobar_jax_md.json"):
     return "\n".join(lines)
 
 
+def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
+    """ms per run of the rotor schemes for each setting of the rotor's while loop (DMV steps per
+    iteration; ``fixedK``: no loop, K steps), and the factor over one step per iteration."""
+    data = _read(docs, name)
+    settings = list(dict.fromkeys(r["loop_batch"] for r in data["rows"]))
+    label = {s: (f"{s} per iteration" if isinstance(s, int) else f"no loop ({s})") for s in settings}
+    lines = [
+        "| scheme | steps | " + " | ".join(label[s] for s in settings) + " |",
+        "|" + "---|" * (len(settings) + 2),
+    ]
+    for scheme, steps in dict.fromkeys((r["scheme"], r["steps"]) for r in data["rows"]):
+        ms = {r["loop_batch"]: r["ms"] for r in data["rows"] if (r["scheme"], r["steps"]) == (scheme, steps)}
+        cells = [
+            f"{ms[s]:.3g}" + ("" if s == settings[0] else f" ({ms[settings[0]] / ms[s]:.2f}×)")
+            for s in settings
+        ]
+        lines.append(f"| {scheme} | {steps} | " + " | ".join(cells) + " |")
+    m = data["machine"]
+    flags = f", XLA_FLAGS `{m['xla_flags']}`" if m["xla_flags"] else ""
+    lines.append(f"\n*From `docs/{name}`: {m['device']}, Python {m['python']}, jax {m['jax']}{flags}.*")
+    return "\n".join(lines)
+
+
 def gradient_compile_table(docs):
     """`benchmarks/compile.py`'s table of ``docs/compile_cpu.json`` (that script loaded by its path)."""
     import importlib.util
@@ -672,6 +695,7 @@ TABLES = {
     "gpu_throughput_table": gpu_throughput_table,
     "gpu_race_table": gpu_race_table,
     "gpu_peer_throughput_table": gpu_peer_throughput_table,
+    "gpu_rotor_loop_table": gpu_rotor_loop_table,
     "race_table_float64": race_table_float64,
     "race_table_float32": race_table_float32,
     "race_summary": race_summary,

@@ -115,7 +115,11 @@ host read of the loop predicate, so with long flows (a race's few long steps) th
 that latency times the iterations, whatever the batch size; taking k steps per iteration divides
 it by k. Each body's count beyond the first two steps is then rounded up to a multiple of k
 (more, shorter DMV steps: never less accurate). On the CPU a body's extra steps cost compute, so
-there it stays 1."""
+there it stays 1. Measured on an H200 (N = 1000, float64, dipole scene, `benchmarks/rotor_loop.py`,
+docs/performance.md): 4 per iteration ran splitting, srkn6b and srkn14a 2.5×, 2.35×, 1.9× faster at
+8 steps per run and cost at most 9% where a body needs one extra step and now takes four; 8 cost
+20% there, 2 gained less (1.5-1.8× at 8 steps). On the CPU (N = 1000, 2 cores) 4 and 8 ranged
+0.68-1.13×."""
 _GPU_LOOP_BATCH = 4
 
 
