@@ -372,8 +372,12 @@ def _repeat(s, n, step, batch=1):
     """
 
     def body(c):
+        if batch == 1:
+            return c[0] + 1, step(c[1])
         s = c[1]
         for _ in range(batch):
+            # Unbarriered, XLA fused the chain of steps and recomputed each step in every consumer
+            # (measured on the CPU: 30x slower at 8 per iteration).
             s = lax.optimization_barrier(step(s))
         return c[0] + batch, s
 
