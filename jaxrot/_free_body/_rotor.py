@@ -498,7 +498,8 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         t: scalar time elapsed, any sign (``t = 0`` returns the input, renormalised).
         substeps: DMV10 steps covering ``t`` (a Python int), or None (default): each body
             takes ``ceil(|ω| |t| / a)`` steps, at least 2 and at most 64, with ``a = 0.2`` rad
-            in float64 and 0.5 in float32 (`substeps_for`). A fixed count is valid while
+            in float64 and 0.5 in float32 (`substeps_for`; traced for a GPU, the steps past
+            the first two rounded up to a multiple of 4, `LOOP_BATCH`). A fixed count is valid while
             ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
 
     Returns:
