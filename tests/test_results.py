@@ -42,6 +42,12 @@ RESULTS = {
     # The rotor schemes only, under each setting of the rotor's while loop.
     "gpu_h200/rotor_loop.json": (None, "STEPS=rotor_loop bash benchmarks/gpu.sh"),
     "gpu_h200/rotor_loop_cmdbuf.json": (None, "STEPS=command_buffers bash benchmarks/gpu.sh"),
+    # The dipole race again with 8 rotor steps per loop iteration, the order >= 4 schemes that run it.
+    "gpu_h200/race_dipole_rotating_field_float64_loop8.json": (
+        None,
+        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole "
+        "bash benchmarks/gpu.sh, with _rotor._GPU_LOOP_BATCH = 8",
+    ),
     "gpu_h200/race_viscous_drag_float64_firstpass.json": (
         None,
         "STEPS=race_viscous bash benchmarks/gpu.sh, or benchmarks/race.py --from-log on its log",
