@@ -12,10 +12,11 @@
 # call stopped early still returns what finished: throughput in float32 at 1e6 and 1e7 bodies
 # without `stage` barriers (GPU default) against jax_md (`throughput`), the rotor's while loop
 # with 1, 2, 4 and 8 DMV steps per iteration, without and with XLA's command buffers (`rotor_loop`,
-# `command_buffers`), the race of the two scenes
-# that miss 5x on the CPU (`race_viscous`, `race_dipole`), then the same throughput with barriers
-# (`barriers`). Seen on an H200 (2026-11-26): throughput 102 s, a race about 200 s; a lent machine
-# allows 10 minutes per call, so run the steps in two calls (STEPS names those of one call).
+# `command_buffers`), the race of the two scenes that miss 5x on the CPU (`race_viscous`,
+# `race_dipole`), then the same throughput with barriers (`barriers`). Seen on an H200
+# (2026-11-26): throughput 102 s, rotor_loop 77 s, command_buffers 42 s, a race about 200 s; a
+# lent machine allows 10 minutes per call, so run the steps in two or three calls (STEPS names
+# those of one call).
 set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
