@@ -15,7 +15,6 @@ the floor the loop's host reads sit on; inexact where a flow turns more than 2 r
 
 import argparse
 import json
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -34,7 +33,7 @@ from jaxrot.comparison import machine_info
 
 
 sys.path.insert(0, str(Path(__file__).parent))
-from race import fixed_step_runner, random_bodies  # noqa: E402
+from race import fixed_step_runner, random_bodies, timed  # noqa: E402
 
 
 def main():
@@ -75,16 +74,12 @@ def main():
             compiled = runner.lower(state, jnp.asarray(1.0), 1).compile()
             compile_s = time.perf_counter() - start
             for steps in steps_list:
-                args = (state, jnp.asarray(scene.t_end / steps), steps)
-                out = jax.block_until_ready(compiled(*args))
-                times = []
-                for _ in range(opts.repeats):
-                    start = time.perf_counter()
-                    jax.block_until_ready(compiled(*args))
-                    times.append(time.perf_counter() - start)
+                out, seconds = timed(
+                    compiled, state, jnp.asarray(scene.t_end / steps), steps, repeats=opts.repeats
+                )
                 ref = first.setdefault((name, steps), out.q)
                 diff = float(jnp.max(quat.angle_between(out.q, ref)))
-                ms = statistics.median(times) * 1e3
+                ms = seconds * 1e3
                 row = {"scheme": name, "steps": steps, "loop_batch": batch, "ms": ms, "compile_s": compile_s,
                        "max_angle_from_batch_1": diff}  # fmt: skip
                 rows.append(row)

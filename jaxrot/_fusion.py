@@ -22,8 +22,17 @@ particle-steps/s, rkmk4 1.9 → 2.4, srkn14a 0.135 → 0.170; no_squish and rozm
 fusion wins (docs/performance.md, "On a GPU")."""
 
 
+def tracing_for_cpu() -> bool:
+    """Whether the program being traced is taken to run on CPU: JAX's default backend.
+
+    Where XLA:CPU and a GPU want different programs (these barriers; the free rotor's loop,
+    `jaxrot._free_body._rotor.LOOP_BATCH`), the choice is made when tracing, by this one rule.
+    """
+    return jax.default_backend() == "cpu"
+
+
 def _barriers() -> bool:
-    return jax.default_backend() == "cpu" if BARRIERS is None else BARRIERS
+    return tracing_for_cpu() if BARRIERS is None else BARRIERS
 
 
 def stage(*values):

@@ -83,7 +83,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._fusion import stage, stage_stacked
+from .._fusion import stage, stage_stacked, tracing_for_cpu
 
 
 __all__ = ["free_rotor"]
@@ -128,7 +128,7 @@ _GPU_LOOP_BATCH = 4
 def _loop_batch() -> int:
     if LOOP_BATCH is not None:
         return LOOP_BATCH
-    return 1 if jax.default_backend() == "cpu" else _GPU_LOOP_BATCH
+    return 1 if tracing_for_cpu() else _GPU_LOOP_BATCH
 
 
 def _modification(moments, x, y):
