@@ -27,7 +27,8 @@ error ``O(a¹¹)`` per step, so round-off at any ``|ω| |t|`` up to 10 rad. The 
 scaling symmetry of the flow and of the DMV map (both functions of ``h m``): ``n`` steps of
 ``t/n`` with the momentum ``m`` are computed as ``n`` steps of ``t/2`` with ``(2/n) m``, so the
 step length stays one scalar. The first two steps are a static loop; the rest a while loop
-that a body in the common range never enters, whose derivative rule carries the steps'
+that a body in the common range never enters (under `jax.vmap`, one loop over the batch with a
+scalar counter, by a batching rule of our own), whose derivative rule carries the steps'
 Jacobian (JAX cannot reverse-differentiate a while loop). Traced for a GPU, the loop takes 4
 steps per iteration and each body's count past the first two is rounded up to a multiple of 4
 (`LOOP_BATCH`): there every iteration waits on a host read of its condition. Measured against `free_motion`
@@ -41,8 +42,10 @@ steps per iteration and each body's count past the first two is rounded up to a 
     flat (0.1, 1, 1.05)        1e-15   8e-16   5e-14   1e-13   4e-13
 
 With a fixed count (``substeps=2``, the default before) the error was 7e-13 at 0.5, 1e-9 at
-1, 3e-6 at 1.9 and NaN from 2. The choice costs 4-21% per call in the common range
-(|ω| t = 0.3, N = 10⁴, one core, same-run A/B; the closing note of issue 32 has the table).
+1, 3e-6 at 1.9 and NaN from 2. The choice costs 3-5% per call in the common range
+(|ω| t = 0.3, N = 10⁴, 2 CPU cores, float64 and float32, the rotor and the ``"splitting"`` step,
+median of 31 interleaved rounds: `benchmarks/rotor.py`, the closing note of issue 32 has the
+table); with JAX's own batching of the while loop it cost 10-14%.
 
 Limits, where the result is NaN rather than wrong: one DMV step may turn by at most 1 rad
 (near π/2 the DMV equation has no solution any more: ``|ω| |t| > 64`` by default, ``> n`` with
@@ -364,26 +367,81 @@ def _split(a):
     return tuple(a[..., k] for k in range(a.shape[-1]))
 
 
-def _repeat(s, n, step, batch=1):
-    """``step`` applied ``n`` times (one body: ``n`` a scalar, a multiple of ``batch``) to the arrays ``s``.
+def _gather(group):
+    """A state group of one body as an array: a tuple of scalar components stacked, an array as is."""
+    return jnp.stack(group) if isinstance(group, tuple) else group
 
-    Written for one body so that under `jax.vmap` JAX's own rule runs the loop while any body needs
-    it and keeps each body's carry once it is done: no select of ours on top (measured: a masked
-    loop over the batch put the carry in an interleaved layout, +10-25% per rotor call). Each
-    iteration applies ``step`` ``batch`` times (`LOOP_BATCH`).
+
+def _scatter(array, like):
+    """`_gather` undone on the leading axis: back to components where ``like`` is a tuple."""
+    return tuple(array[k] for k in range(len(like))) if isinstance(like, tuple) else array
+
+
+def _repeat(step, n, state, params, *, first=0, batch=1, custom=True):
+    """``step(params, state)`` applied ``first + n`` times to one body (``n`` a multiple of ``batch``).
+
+    ``state`` is a tuple of groups, each a tuple of scalar components or an array; ``step`` sees
+    each group as an array (components stacked). The ``first`` steps are a static loop, the ``n``
+    more a while loop. One body: a loop on its own count. Under `jax.vmap` (a custom rule, not
+    JAX's): one loop over the batch with a scalar counter up to the largest count, each body's state
+    kept once its own count is done, and every group component-major (the batch axis last, so the
+    components of a tuple group are contiguous rows). JAX's rule counted per body, reduced the
+    batched predicate in every iteration and carried ``(N, 4)`` rows that XLA:CPU transposed on the
+    way in and out: the loop cost ~8% of a rotor call where no body entered it (|ω| t = 0.3,
+    N = 10⁴). ``custom=False`` keeps JAX's rule (the derivative rule's Jacobian loop, where ours
+    made gradients 9-18% slower). Each iteration of the while loop applies ``step`` ``batch``
+    times (`LOOP_BATCH`).
     """
 
-    def body(c):
+    def iterate(step_once, s):
         if batch == 1:
-            return c[0] + 1, step(c[1])
-        s = c[1]
+            return step_once(s)
         for _ in range(batch):
             # Unbarriered, XLA fused the chain of steps and recomputed each step in every consumer
             # (measured on the CPU: 30x slower at 8 per iteration).
-            s = lax.optimization_barrier(step(s))
-        return c[0] + batch, s
+            s = lax.optimization_barrier(step_once(s))
+        return s
 
-    return lax.while_loop(lambda c: c[0] < n, body, (jnp.zeros((), n.dtype), s))[1]
+    def loops(step_once, n, s, top, mask):
+        if first:
+            s = lax.fori_loop(0, first, lambda _, s: step_once(s), s)
+
+        def body(c):
+            i, s = c
+            new = iterate(step_once, s)
+            if mask:  # bodies past their own count keep their state (n broadcasts on the last axis)
+                new = jax.tree_util.tree_map(lambda a, b: jnp.where(i < n, a, b), new, s)
+            return i + batch, new
+
+        return lax.while_loop(lambda c: c[0] < top, body, (jnp.zeros((), n.dtype), s))[1]
+
+    def run(n, state, params):
+        s = loops(lambda s: step(params, s), n, tuple(map(_gather, state)), n, mask=False)
+        return tuple(map(_scatter, s, state))
+
+    if not custom:
+        return run(n, state, params)
+    run = jax.custom_batching.custom_vmap(run)
+
+    @run.def_vmap
+    def run_batched(axis_size, in_batched, n, state, params):
+        n_batched, state_batched, params_batched = in_batched
+        state = jax.tree_util.tree_map(
+            lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x))), state, state_batched
+        )
+        # Tuple groups stack their (N,) components to (k, N); arrays move the batch axis last.
+        s = tuple(_gather(g) if isinstance(g, tuple) else jnp.moveaxis(g, 0, -1) for g in state)
+        params_axes = jax.tree_util.tree_map(lambda b: 0 if b else None, params_batched)
+        step_all = jax.vmap(step, in_axes=(params_axes, -1), out_axes=-1)
+        top = jnp.max(n) if n_batched else n
+        s = loops(lambda s: step_all(params, s), n, s, top, mask=n_batched)
+        out = tuple(
+            _scatter(x, g) if isinstance(g, tuple) else jnp.moveaxis(x, -1, 0)
+            for x, g in zip(s, state, strict=True)
+        )
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return run(n, state, params)
 
 
 def _per_body(fn, batch, *args):
@@ -420,30 +478,38 @@ def _stacked_step(p, fad, h):
 
 
 def _first_steps(q, m, p, fad, h):
-    """The first `_MIN_SUBSTEPS` DMV steps, a static loop."""
+    """The first `_MIN_SUBSTEPS` DMV steps of one body (``q`` ``(4,)``, ``m`` ``(3,)``), a static loop."""
     step = _stacked_step(p, fad, h)
     return lax.fori_loop(0, _MIN_SUBSTEPS, lambda _, carry: step(carry), (q, m))
 
 
+def _primal_step(params, s):
+    return _stacked_step(*params)(s)
+
+
 @jax.custom_jvp
 def _dmv_steps(q, m, p, fad, h, n):
-    """``n >= _MIN_SUBSTEPS`` DMV steps of one body: ``q`` ``(4,)``, ``m`` ``(3,)`` → component tuples.
+    """``n >= _MIN_SUBSTEPS`` DMV steps of one body: component tuples ``q`` (4) and ``m`` (3) → the same.
 
     The first `_MIN_SUBSTEPS` in a static loop, the rest in a while loop that a body in the common
-    range never enters (under `jax.vmap`, JAX's rule runs it while any body needs it). JAX cannot
-    reverse-differentiate a while loop, so the derivative rule carries the extra steps' Jacobian as
-    a value: the tangent is the static steps' derivative followed by a product with that Jacobian,
-    which reverse mode can transpose.
+    range never enters (`_repeat`). JAX cannot reverse-differentiate a while loop, so the derivative
+    rule carries the extra steps' Jacobian as a value: the tangent is the static steps' derivative
+    followed by a product with that Jacobian, which reverse mode can transpose.
     """
-    q, m = _repeat(_first_steps(q, m, p, fad, h), n - _MIN_SUBSTEPS, _stacked_step(p, fad, h), _loop_batch())
-    return _split(q), _split(m)
+    return _repeat(
+        _primal_step, n - _MIN_SUBSTEPS, (q, m), (p, fad, h), first=_MIN_SUBSTEPS, batch=_loop_batch()
+    )
 
 
 @_dmv_steps.defjvp
 def _dmv_steps_jvp(primals, tangents):
     q, m, p, fad, h, n = primals
     dq, dm, dp, dfad, dh, _ = tangents
-    s, ds = jax.jvp(_first_steps, (q, m, p, fad, h), (dq, dm, dp, dfad, dh))
+    s, ds = jax.jvp(
+        _first_steps,
+        (jnp.stack(q), jnp.stack(m), p, fad, h),
+        (jnp.stack(dq), jnp.stack(dm), dp, dfad, dh),
+    )
     state = jnp.concatenate(s)
     theta = jnp.stack((*p, *fad, h))
     z_tangent = jnp.concatenate([*ds, jnp.stack((*dp, *dfad, dh))])
@@ -458,7 +524,7 @@ def _dmv_steps_jvp(primals, tangents):
         value = flat(z)
         return value, value
 
-    def step(carry):
+    def step(theta, carry):
         state, jac = carry  # (7,) and its Jacobian in (state, θ) after the first steps, (7, 14)
         # ∂ step / ∂ (state, θ): (7, 14), and the step's value from the same trace (jacfwd's primal).
         d, state = jax.jacfwd(with_value, has_aux=True)(jnp.concatenate([state, theta]))
@@ -466,7 +532,12 @@ def _dmv_steps_jvp(primals, tangents):
         return state, jac
 
     state, jac = _repeat(
-        (state, jnp.eye(n_s, size, dtype=state.dtype)), n - _MIN_SUBSTEPS, step, _loop_batch()
+        step,
+        n - _MIN_SUBSTEPS,
+        (state, jnp.eye(n_s, size, dtype=state.dtype)),
+        theta,
+        batch=_loop_batch(),
+        custom=False,
     )
     d_state = jac @ z_tangent
     return (_split(state[:4]), _split(state[4:])), (_split(d_state[:4]), _split(d_state[4:]))
@@ -539,7 +610,10 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     w_body = _turn(q, _unit_residual(q), tuple(omega[..., k] for k in range(3)), inverse=True)
     targets = _invariants(w_body, inertia)
     m = tuple(i * w for i, w in zip(inertia, w_body, strict=True))
-    total_angle = fixed(jnp.abs(t) * jnp.sqrt(w_body[0] ** 2 + w_body[1] ** 2 + w_body[2] ** 2))
+    # |ω| from the world frame (a rotation keeps it): from w_body, XLA:CPU recomputed the rotation
+    # in one more pass over the bodies, for the step count alone.
+    w_world = tuple(omega[..., k] for k in range(3))
+    total_angle = fixed(jnp.abs(t) * jnp.sqrt(w_world[0] ** 2 + w_world[1] ** 2 + w_world[2] ** 2))
     if substeps is None:
         # n steps of t/n for the momentum m are 2 steps' worth of t/2 for the momentum (2/n) m, then
         # scaled back: the flow, and the DMV map (a function of h m), are invariant under h → h/k,
@@ -591,11 +665,11 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     # The loop carries q and m as (…, 4) and (…, 3) arrays: XLA:CPU then updates each in one loop,
     # where seven separate arrays took seven loops and seven copies per substep (measured: the
     # "splitting" step 10% faster, float64, N = 10⁴).
-    carry = (jnp.stack(q, axis=-1), jnp.stack(m, axis=-1))
     if substeps is None:
         batch = jnp.broadcast_shapes(count.shape, jnp.shape(h))
-        q, m = _per_body(_dmv_steps, batch, *carry, p, fad, h, count)
+        q, m = _per_body(_dmv_steps, batch, q, m, p, fad, h, count)
     else:
+        carry = (jnp.stack(q, axis=-1), jnp.stack(m, axis=-1))
         if _SCAN:
             carry = lax.fori_loop(0, substeps, substep, carry)
         else:

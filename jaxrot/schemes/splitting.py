@@ -49,8 +49,8 @@ class AbstractRotorSplitting(AbstractScheme):
     ``rotor_substeps`` (static, ``"dmv"`` only): None (default) lets each body take the DMV
     steps its flow needs (``⌈|ω| t / 0.2⌉`` in float64, ``/ 0.5`` in float32, 2 to 64: exact to
     round-off up to 10 rad per flow); an int fixes the count, for a user who knows the range
-    (each DMV step may turn by at most 1 rad, NaN beyond): 2 is 4-21% cheaper per step than
-    the default's choice at ``|ω| t <= 0.3`` (float64 and float32, 10⁴ bodies).
+    (each DMV step may turn by at most 1 rad, NaN beyond): 2 is 3-5% cheaper per step than
+    the default's choice at ``|ω| t <= 0.3`` (float64 and float32, 10⁴ bodies, torque-free).
     """
 
     rotor: str = eqx.field(default="dmv", static=True)
