@@ -2,6 +2,7 @@
 scenes and performance pages of the documentation, run as printed (each in a fresh process, in a
 scratch folder)."""
 
+import importlib.util
 import os
 import pathlib
 import re
@@ -41,3 +42,17 @@ def test_readme_example_runs(code, tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     if "sharding.spec" in code:
         assert "(None, 'p')" in out.stdout
+
+
+def test_readme_race_range_is_the_results_file():
+    """README's race sentence quotes the range of speed-ups that the committed results file gives
+    (`docs/race_cpu/race_float64.json`, rendered on the docs site by the same hook), so a rerun of
+    the race cannot leave a stale number on the front door."""
+    spec = importlib.util.spec_from_file_location("docs_tables_hook", ROOT / "docs" / "_hooks" / "tables.py")
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    low, high, slower = tables.race_ratios(ROOT / "docs")
+    quoted = re.search(r"by (\d+\.\d+)× to (\d+\.\d+)×", README.read_text())
+    assert quoted, "README lost its race sentence"
+    assert (quoted.group(1), quoted.group(2)) == (f"{low:.2f}", f"{high:.2f}")
+    assert not slower  # the sentence says faster "at every error budget"
