@@ -11,15 +11,22 @@
 4. Drift of |L| and of the energy over 10⁴ calls (64 bodies, |ω| t = 0.05, float32 and float64)
    with the principal-frame round trip a splitting makes between calls, rotor against free_motion.
 
+5. With ``--against REV``: the rotor of git revision REV imported beside this one, forward calls and
+   gradients (in the moments) at |ω| t = 0.3, 0.9, 2.9, interleaved in one process.
+
     python benchmarks/rotor.py                 # a few minutes on 2 cores
     python benchmarks/rotor.py --n 1000 --no-drift
+    python benchmarks/rotor.py --against 95050c5 --no-drift
 """
 
 import argparse
+import importlib.util
 import os
 import platform
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 
 import jax
@@ -233,12 +240,78 @@ def choice_cost_table(n, rounds):
     return "\n".join(lines)
 
 
+def rotor_at(rev):
+    """`free_rotor` of git revision ``rev``, imported as a module of the package (its relative imports
+    resolve against this checkout's `jaxrot`)."""
+    source = subprocess.run(
+        ["git", "show", f"{rev}:jaxrot/_free_body/_rotor.py"], capture_output=True, text=True, check=True
+    ).stdout
+    path = os.path.join(tempfile.mkdtemp(), "_rotor_rev.py")
+    with open(path, "w") as f:
+        f.write(source)
+    spec = importlib.util.spec_from_file_location("jaxrot._free_body._rotor_rev", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.free_rotor
+
+
+def against_table(rev, n, rounds=9, calls=20):
+    """This checkout's rotor against revision ``rev``'s: ns per body-call, forward (``calls`` vmapped
+    calls in a `fori_loop`) and the gradient of a sum of outputs in the moments, interleaved."""
+    rotors = {"this": free_rotor, rev: rotor_at(rev)}
+    programs = {}
+    for name, dtype in DTYPES.items():
+        q, w = random_states(n, dtype)
+        moments = jnp.asarray(MOMENTS, dtype)
+        for turn in (0.3, 0.9, 2.9):  # |ω| = 1; away from the count rule's steps (0.2 and 0.5 rad)
+            dt = jnp.asarray(turn, dtype)
+            for label, rotor in rotors.items():
+
+                def forward(s, rotor=rotor, moments=moments, dt=dt):
+                    one = jax.vmap(lambda a, b: rotor(a, b, moments, dt))
+                    return jax.lax.fori_loop(0, calls, lambda i, s: one(*s), s)
+
+                def gradient(s, rotor=rotor, moments=moments, dt=dt):
+                    def loss(m):
+                        out = jax.vmap(lambda a, b: rotor(a, b, m, dt))(*s)
+                        return jnp.sum(out[0][:, 1]) + jnp.sum(out[1])
+
+                    return jax.grad(loss)(moments)
+
+                programs[name, turn, "forward", label] = (jax.jit(forward).lower((q, w)).compile(), calls)
+                programs[name, turn, "gradient", label] = (jax.jit(gradient).lower((q, w)).compile(), 1)
+        samples = {key: [] for key in programs if key[0] == name}
+        for key in samples:
+            jax.block_until_ready(programs[key][0]((q, w)))
+        for _ in range(rounds):
+            for key in samples:
+                compiled, count = programs[key]
+                start = time.perf_counter()
+                jax.block_until_ready(compiled((q, w)))
+                samples[key].append((time.perf_counter() - start) / (count * n) * 1e9)
+        for key, values in samples.items():
+            programs[key] = statistics.median(values)
+    lines = [
+        f"| dtype | |ω| t | program | {rev} [ns] | this [ns] | this / {rev} |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in DTYPES:
+        for turn in (0.3, 0.9, 2.9):
+            for program in ("forward", "gradient"):
+                old, new = programs[name, turn, program, rev], programs[name, turn, program, "this"]
+                lines.append(f"| {name} | {turn} | {program} | {old:.1f} | {new:.1f} | {new / old:.3f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, default=10_000, help="bodies for the cost table")
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--no-drift", action="store_true", help="skip the 10^4-call drift table")
     parser.add_argument("--rounds", type=int, default=31, help="interleaved rounds of the choice-cost table")
+    parser.add_argument(
+        "--against", metavar="REV", help="also time the rotor of git revision REV beside this one"
+    )
     ns = parser.parse_args(argv)
     print(header())
     print(f"\nCost per particle-step, N = {ns.n}, I = {MOMENTS}, |ω| t = 0.3, median of {ns.repeats}")
@@ -248,6 +321,9 @@ def main(argv=None):
         f"median of {ns.rounds} interleaved rounds"
     )
     print(choice_cost_table(ns.n, ns.rounds))
+    if ns.against:
+        print(f"\nThis rotor against {ns.against}'s, N = {ns.n}, median of 9 interleaved rounds")
+        print(against_table(ns.against, ns.n))
     print(error_table())
     if not ns.no_drift:
         print("\nRelative drift over 10^4 calls (|ω| t = 0.05, 64 bodies, principal-frame round trip)")
