@@ -42,7 +42,7 @@ steps per iteration and each body's count past the first two is rounded up to a 
     flat (0.1, 1, 1.05)        1e-15   8e-16   5e-14   1e-13   4e-13
 
 With a fixed count (``substeps=2``, the default before) the error was 7e-13 at 0.5, 1e-9 at
-1, 3e-6 at 1.9 and NaN from 2. The choice costs 3-5% per call in the common range
+1, 3e-6 at 1.9 and NaN from 2. The choice costs 3-6% per call in the common range
 (|ω| t = 0.3, N = 10⁴, 2 CPU cores, float64 and float32, the rotor and the ``"splitting"`` step,
 median of 31 interleaved rounds: `benchmarks/rotor.py`, the closing note of issue 32 has the
 table); with JAX's own batching of the while loop it cost 10-14%.
