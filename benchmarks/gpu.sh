@@ -11,16 +11,19 @@
 # Each step has its own time limit and writes its own file under $OUT, most important first, so a
 # call stopped early still returns what finished: throughput in float32 at 1e6 and 1e7 bodies
 # without `stage` barriers (GPU default) against jax_md (`throughput`), the rotor's while loop
-# with 1, 2, 4 and 8 DMV steps per iteration, without and with XLA's command buffers (`rotor_loop`,
-# `command_buffers`), the race of the two scenes that miss 5x on the CPU (`race_viscous`,
-# `race_dipole`), then the same throughput with barriers (`barriers`). Seen on an H200
-# (2026-11-26): throughput 102 s, rotor_loop 77 s, command_buffers 42 s, a race about 200 s; a
+# with 1, 2, 4 and 8 DMV steps per iteration, and with XLA's command buffers as a per-program
+# compiler option (`rotor_loop`) and as the process's flag (`command_buffers`), the race of the two
+# scenes that miss 5x on the CPU (`race_viscous`, `race_dipole`; `race_dipole_cmdbuf` with the
+# command-buffer flag for every program), then the same throughput with barriers (`barriers`). Seen on an H200
+# (2026-11-26): throughput 102 s, rotor_loop 77 s (before its command-buffer rows), command_buffers 42 s,
+# a race about 200 s; on an H100 (2026-11-26): rotor_loop 135 s, command_buffers 45 s, race_dipole
+# 219 s, race_dipole_cmdbuf 205 s (RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a); a
 # lent machine allows 10 minutes per call, so run the steps in two or three calls (STEPS names
 # those of one call).
 set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
-STEPS=",${STEPS:-throughput,rotor_loop,command_buffers,race_viscous,race_dipole,barriers},"
+STEPS=",${STEPS:-throughput,rotor_loop,command_buffers,race_viscous,race_dipole,race_dipole_cmdbuf,barriers},"
 PY=${PYTHON:-python3}
 # jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 version=$($PY -c "import tomllib; print(tomllib.load(open('pyproject.toml', 'rb'))['project']['version'])")
@@ -46,11 +49,19 @@ RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8
 TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
 RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
 step throughput 150 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
-step rotor_loop 200 "rotor loop batch" $PY benchmarks/rotor_loop.py --fixed-substeps 2 --json "$OUT/rotor_loop.json"
+# Command buffers as a per-program option name every command type (the defaults too, which differ
+# between XLA versions): the first list that compiles is used.
+CB_TYPES=${CB_TYPES:-"FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,DYNAMIC_SLICE_FUSION,WHILE,CONDITIONAL;FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL;FUSION,CUBLAS,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL"}
+step rotor_loop 240 "rotor loop batch, and command buffers as a compiler option" $PY benchmarks/rotor_loop.py \
+    --fixed-substeps 2 --command-buffers "$CB_TYPES" --json "$OUT/rotor_loop.json"
 # The same with XLA's CUDA-graph command buffers holding while loops and conditionals (a user's flag).
 step command_buffers 120 "rotor loop batch, command buffers" env XLA_FLAGS=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL \
     $PY benchmarks/rotor_loop.py --batches 1,4 --fixed-substeps 2 --json "$OUT/rotor_loop_cmdbuf.json"
 step race_viscous 260 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
 step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
+# Both sides of the race compiled with command buffers holding while loops (a user's flag, so every
+# program gets it: diffrax's adaptive loops too).
+step race_dipole_cmdbuf 260 "race dipole_rotating_field, command buffers" env XLA_FLAGS=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL \
+    $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole_cmdbuf"
 step barriers 150 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
 ls -R "$OUT"

@@ -13,8 +13,43 @@ from jaxrot._integrate import _run
 
 def test_options_per_backend():
     assert jaxrot.compiler_options("cpu") == {"xla_cpu_experimental_ynn_fusion_type": ""}
-    assert jaxrot.compiler_options("gpu") == {}
+    types = jaxrot.compiler_options("gpu")["xla_gpu_enable_command_buffer"].split(",")
+    assert {"WHILE", "CONDITIONAL", "FUSION", "CUBLAS", "CUDNN", "CUSTOM_CALL"} <= set(types)
+    assert jaxrot.compiler_options("cuda") == jaxrot.compiler_options("gpu")
+    assert jaxrot.compiler_options("tpu") == {}
     assert jaxrot.compiler_options() == jaxrot.compiler_options(jax.default_backend())
+
+
+@pytest.fixture
+def fresh_gpu_options():
+    _compile._gpu_options.cache_clear()
+    yield
+    _compile._gpu_options.cache_clear()
+
+
+@pytest.mark.parametrize(
+    "lists, expected",
+    [
+        (("NOT_A_TYPE,WHILE", "FUSION,WHILE,CONDITIONAL"), "FUSION,WHILE,CONDITIONAL"),
+        (("NOT_A_TYPE,WHILE",), None),
+    ],
+)
+def test_gpu_options_take_the_first_list_this_jaxlib_accepts(monkeypatch, fresh_gpu_options, lists, expected):
+    """XLA checks the names when it compiles (on any backend: they are one proto's enum)."""
+    monkeypatch.setattr(_compile, "_COMMAND_BUFFER_TYPES", lists)
+    options = jaxrot.compiler_options("gpu")
+    assert options == ({} if expected is None else {"xla_gpu_enable_command_buffer": expected})
+
+
+def test_gpu_options_compile_and_change_nothing_on_this_backend():
+    """What a GPU user passes to their jit compiles here too (XLA:CPU ignores command buffers)."""
+    state = jaxrot.RotState(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, -1.0, 2.0]))
+
+    def run(s):
+        return jaxrot.rollout("splitting", s, jnp.array([1.0, 2.0, 3.0]), 0.01, 20).q
+
+    gpu_options = jax.jit(run, compiler_options=jaxrot.compiler_options("gpu"))
+    np.testing.assert_array_equal(gpu_options(state), jax.jit(run)(state))
 
 
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="XLA:CPU option")

@@ -52,6 +52,19 @@ RESULTS = {
         None,
         "STEPS=race_viscous bash benchmarks/gpu.sh, or benchmarks/race.py --from-log on its log",
     ),
+    # After 66a9078, on an H100: the loop settings and command buffers as a compiler option, the flag.
+    "gpu_h100/rotor_loop.json": (None, "STEPS=rotor_loop bash benchmarks/gpu.sh"),
+    "gpu_h100/rotor_loop_cmdbuf_flag.json": (None, "STEPS=command_buffers bash benchmarks/gpu.sh"),
+    "gpu_h100/race_dipole_rotating_field_float64.json": (
+        None,
+        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole "
+        "bash benchmarks/gpu.sh",
+    ),
+    "gpu_h100/race_dipole_rotating_field_float64_cmdbuf.json": (
+        None,
+        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole_cmdbuf "
+        "bash benchmarks/gpu.sh",
+    ),
 }
 
 

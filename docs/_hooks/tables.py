@@ -234,7 +234,8 @@ def gpu_race_table(docs, name="gpu_h100/race_heavy_top_float64.json"):
         lines.append("")
     if data.get("retimed", True):
         m = data["machine"]
-        lines.append(f"*From `docs/{name}`: {m['device']}, jax {m['jax']}.*")
+        flags = f", XLA_FLAGS `{m['xla_flags']}`" if m.get("xla_flags") else ""
+        lines.append(f"*From `docs/{name}`: {m['device']}, jax {m['jax']}{flags}.*")
     else:
         lines.append(
             f"*From `docs/{name}`, rebuilt from the log `{data['source']}` of a run stopped before its "
@@ -274,7 +275,15 @@ def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
     iteration; ``fixedK``: no loop, K steps), and the factor over one step per iteration."""
     data = _read(docs, name)
     settings = list(dict.fromkeys(r["loop_batch"] for r in data["rows"]))
-    label = {s: (f"{s} per iteration" if isinstance(s, int) else f"no loop ({s})") for s in settings}
+
+    def label(s):
+        if isinstance(s, int):
+            return f"{s} per iteration"
+        if s.endswith("+cb"):
+            return f"{s[:-3]} per iteration, command buffers"
+        return f"no loop ({s})"
+
+    label = {s: label(s) for s in settings}
     lines = [
         "| scheme | steps | " + " | ".join(label[s] for s in settings) + " |",
         "|" + "---|" * (len(settings) + 2),
