@@ -180,6 +180,23 @@ def drift_table():
     return "\n".join(lines)
 
 
+def interleaved(programs, args, rounds):
+    """ns per body-call of each compiled program, timed round-robin: ``{key: [per round]}``.
+
+    ``programs`` maps a key to ``(compiled, calls per run, bodies)``; every program runs once before
+    the rounds (this VM's timings move ±5-10% between runs: only ratios within one run count).
+    """
+    samples = {key: [] for key in programs}
+    for compiled, _, _ in programs.values():
+        jax.block_until_ready(compiled(args))
+    for _ in range(rounds):
+        for key, (compiled, calls, bodies) in programs.items():
+            start = time.perf_counter()
+            jax.block_until_ready(compiled(args))
+            samples[key].append((time.perf_counter() - start) / (calls * bodies) * 1e9)
+    return samples
+
+
 def choice_cost_table(n, rounds):
     """The per-body step count against a fixed two (the rotor before), at |ω| t = 0.3 where both take
     two steps: the rotor alone and the `"splitting"` step (torque-free and a heavy top), every
@@ -221,15 +238,8 @@ def choice_cost_table(n, rounds):
                 ("splitting, torque-free", free),
                 ("splitting, heavy top", top),
             ):
-                programs[program, label] = jax.jit(fn).lower((q, w)).compile()
-        samples = {key: [] for key in programs}
-        for compiled in programs.values():
-            jax.block_until_ready(compiled((q, w)))
-        for _ in range(rounds):
-            for key, compiled in programs.items():
-                start = time.perf_counter()
-                jax.block_until_ready(compiled((q, w)))
-                samples[key].append((time.perf_counter() - start) / (100 * n) * 1e9)
+                programs[program, label] = (jax.jit(fn).lower((q, w)).compile(), 100, n)
+        samples = interleaved(programs, (q, w), rounds)
         for program in ("rotor", "splitting, torque-free", "splitting, heavy top"):
             fixed, chosen = (statistics.median(samples[program, label]) for label in ("fixed 2", "per body"))
             ratios = np.asarray(samples[program, "per body"]) / np.asarray(samples[program, "fixed 2"])
@@ -259,8 +269,9 @@ def against_table(rev, n, rounds=9, calls=20):
     """This checkout's rotor against revision ``rev``'s: ns per body-call, forward (``calls`` vmapped
     calls in a `fori_loop`) and the gradient of a sum of outputs in the moments, interleaved."""
     rotors = {"this": free_rotor, rev: rotor_at(rev)}
-    programs = {}
+    medians = {}
     for name, dtype in DTYPES.items():
+        programs = {}
         q, w = random_states(n, dtype)
         moments = jnp.asarray(MOMENTS, dtype)
         for turn in (0.3, 0.9, 2.9):  # |ω| = 1; away from the count rule's steps (0.2 and 0.5 rad)
@@ -278,19 +289,10 @@ def against_table(rev, n, rounds=9, calls=20):
 
                     return jax.grad(loss)(moments)
 
-                programs[name, turn, "forward", label] = (jax.jit(forward).lower((q, w)).compile(), calls)
-                programs[name, turn, "gradient", label] = (jax.jit(gradient).lower((q, w)).compile(), 1)
-        samples = {key: [] for key in programs if key[0] == name}
-        for key in samples:
-            jax.block_until_ready(programs[key][0]((q, w)))
-        for _ in range(rounds):
-            for key in samples:
-                compiled, count = programs[key]
-                start = time.perf_counter()
-                jax.block_until_ready(compiled((q, w)))
-                samples[key].append((time.perf_counter() - start) / (count * n) * 1e9)
-        for key, values in samples.items():
-            programs[key] = statistics.median(values)
+                programs[turn, "forward", label] = (jax.jit(forward).lower((q, w)).compile(), calls, n)
+                programs[turn, "gradient", label] = (jax.jit(gradient).lower((q, w)).compile(), 1, n)
+        for key, values in interleaved(programs, (q, w), rounds).items():
+            medians[(name, *key)] = statistics.median(values)
     lines = [
         f"| dtype | |ω| t | program | {rev} [ns] | this [ns] | this / {rev} |",
         "|---|---|---|---|---|---|",
@@ -298,7 +300,7 @@ def against_table(rev, n, rounds=9, calls=20):
     for name in DTYPES:
         for turn in (0.3, 0.9, 2.9):
             for program in ("forward", "gradient"):
-                old, new = programs[name, turn, program, rev], programs[name, turn, program, "this"]
+                old, new = medians[name, turn, program, rev], medians[name, turn, program, "this"]
                 lines.append(f"| {name} | {turn} | {program} | {old:.1f} | {new:.1f} | {new / old:.3f} |")
     return "\n".join(lines)
 
