@@ -42,7 +42,8 @@ _COMMAND_BUFFER_TYPES = (
 
 def _accepted(options: dict[str, str]) -> bool:
     try:
-        jax.jit(lambda x: x + 1).lower(jnp.zeros(())).compile(compiler_options=options)
+        one_op = jax.jit(lambda x: x + 1).lower(jax.ShapeDtypeStruct((), jnp.float32))
+        one_op.compile(compiler_options=options)
     except Exception:  # noqa: BLE001 - an unknown name is a backend error whose type varies
         return False
     return True

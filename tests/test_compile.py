@@ -41,6 +41,17 @@ def test_gpu_options_take_the_first_list_this_jaxlib_accepts(monkeypatch, fresh_
     assert options == ({} if expected is None else {"xla_gpu_enable_command_buffer": expected})
 
 
+def test_gpu_options_can_be_first_asked_for_inside_a_trace(fresh_gpu_options):
+    """The probe compiles a program of its own from shapes: a user's jit around the call is no obstacle."""
+    expected = _compile._COMMAND_BUFFER_TYPES[0]
+
+    @jax.jit
+    def inside(x):
+        return x, jaxrot.compiler_options("gpu")["xla_gpu_enable_command_buffer"] == expected
+
+    assert inside(1.0)[1]
+
+
 def test_gpu_options_compile_and_change_nothing_on_this_backend():
     """What a GPU user passes to their jit compiles here too (XLA:CPU ignores command buffers)."""
     state = jaxrot.RotState(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, -1.0, 2.0]))
