@@ -49,19 +49,18 @@ RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8
 TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
 RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
 step throughput 150 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
-# Command buffers as a per-program option name every command type (the defaults too, which differ
-# between XLA versions): the first list that compiles is used.
-CB_TYPES=${CB_TYPES:-"FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,DYNAMIC_SLICE_FUSION,WHILE,CONDITIONAL;FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL;FUSION,CUBLAS,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL"}
+# Command buffers as the per-program option jaxrot.compiler_options() passes on a GPU.
 step rotor_loop 240 "rotor loop batch, and command buffers as a compiler option" $PY benchmarks/rotor_loop.py \
-    --fixed-substeps 2 --command-buffers "$CB_TYPES" --json "$OUT/rotor_loop.json"
+    --fixed-substeps 2 --command-buffers --json "$OUT/rotor_loop.json"
 # The same with XLA's CUDA-graph command buffers holding while loops and conditionals (a user's flag).
-step command_buffers 120 "rotor loop batch, command buffers" env XLA_FLAGS=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL \
+CB_FLAG=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL
+step command_buffers 120 "rotor loop batch, command buffers" env XLA_FLAGS=$CB_FLAG \
     $PY benchmarks/rotor_loop.py --batches 1,4 --fixed-substeps 2 --json "$OUT/rotor_loop_cmdbuf.json"
 step race_viscous 260 "race viscous_drag" $PY "${RACE[@]}" --scenes viscous_drag --out "$OUT/race_viscous_drag"
 step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole"
 # Both sides of the race compiled with command buffers holding while loops (a user's flag, so every
 # program gets it: diffrax's adaptive loops too).
-step race_dipole_cmdbuf 260 "race dipole_rotating_field, command buffers" env XLA_FLAGS=--xla_gpu_enable_command_buffer=+WHILE,+CONDITIONAL \
+step race_dipole_cmdbuf 260 "race dipole_rotating_field, command buffers" env XLA_FLAGS=$CB_FLAG \
     $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole_cmdbuf"
 step barriers 150 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
 ls -R "$OUT"

@@ -9,10 +9,9 @@ step counts, for each loop batch in one process (caches cleared between them), a
 largest orientation difference from batch 1 (more, shorter DMV steps: the rotor's error, ~1e-13,
 not the scheme's). ``--fixed-substeps 2`` adds rows with the count fixed (no while loop at all:
 the floor the loop's host reads sit on; inexact where a flow turns more than 2 rad).
-``--command-buffers`` adds rows compiled with XLA's command buffers (CUDA graphs) holding while
-loops and conditionals, passed as a per-program compiler option (not the process's XLA_FLAGS): the
-first of its ';'-separated lists of command types that compiles is used, and each row records how
-many command-buffer calls the optimized program has.
+``--command-buffers`` adds rows compiled with `jaxrot.compiler_options("gpu")`: XLA's command
+buffers (CUDA graphs) holding while loops and conditionals, a per-program compiler option (not the
+process's XLA_FLAGS). The optimized program's text does not show them: only the timings do.
 
     python benchmarks/rotor_loop.py --json rotor_loop.json           # on the GPU machine
 """
@@ -56,10 +55,8 @@ def main():
     )  # fmt: skip
     parser.add_argument(
         "--command-buffers",
-        default=None,
-        metavar="TYPES[;TYPES...]",
-        help="also time the batches of --command-buffer-batches compiled with "
-        "xla_gpu_enable_command_buffer=TYPES (the first list that compiles)",
+        action="store_true",
+        help='also time the batches of --command-buffer-batches compiled with jaxrot.compiler_options("gpu")',
     )
     parser.add_argument("--command-buffer-batches", default="1,4")
     parser.add_argument("--json", default=None)
@@ -75,9 +72,8 @@ def main():
     if opts.fixed_substeps:
         settings.append((f"fixed{opts.fixed_substeps}", 1, opts.fixed_substeps, None))
     if opts.command_buffers:
-        types = command_buffer_types(opts.command_buffers.split(";"))
-        info["command_buffer_types"] = types
-        cb = {"xla_gpu_enable_command_buffer": types} if types else None
+        cb = jaxrot.compiler_options("gpu")
+        info["command_buffer_types"] = cb.get("xla_gpu_enable_command_buffer")
         for b in opts.command_buffer_batches.split(","):
             settings.append((f"{b}+cb", int(b), None, cb))
     for label, batch, fixed, options in settings:
@@ -91,7 +87,6 @@ def main():
             start = time.perf_counter()
             compiled = runner.lower(state, jnp.asarray(1.0), 1).compile(compiler_options=options)
             compile_s = time.perf_counter() - start
-            buffers = compiled.as_text().count("command_buffer")
             for steps in steps_list:
                 out, seconds = timed(
                     compiled, state, jnp.asarray(scene.t_end / steps), steps, repeats=opts.repeats
@@ -100,11 +95,10 @@ def main():
                 diff = float(jnp.max(quat.angle_between(out.q, ref)))
                 ms = seconds * 1e3
                 row = {"scheme": name, "steps": steps, "loop_batch": label, "ms": ms, "compile_s": compile_s,
-                       "max_angle_from_batch_1": diff, "command_buffer_mentions": buffers}  # fmt: skip
+                       "max_angle_from_batch_1": diff}  # fmt: skip
                 rows.append(row)
                 print(f"{name:10s} steps {steps:4d} batch {label}  {row['ms']:8.2f} ms  "
-                      f"compile {compile_s:5.1f} s  Δ {diff:.1e}  command buffers {buffers}",
-                      flush=True)  # fmt: skip
+                      f"compile {compile_s:5.1f} s  Δ {diff:.1e}", flush=True)  # fmt: skip
     print("\nms per run (ratio to batch 1):")
     for name in opts.schemes.split(","):
         for steps in steps_list:
@@ -117,35 +111,6 @@ def main():
         Path(opts.json).write_text(
             json.dumps({"machine": info, "options": vars(opts), "rows": rows}, indent=2)
         )
-
-
-def command_buffer_types(candidates):
-    """The first list of command types that XLA accepts as ``xla_gpu_enable_command_buffer``.
-
-    A per-program option replaces the repeated field with the names given (no ``+WHILE`` syntax,
-    unlike the flag), so each candidate names the default types too; their names differ between
-    XLA versions. Tried on a small while loop; ``None`` if none compiles.
-    """
-
-    def loop(x):
-        return jax.lax.while_loop(lambda c: c[0] < 10, lambda c: (c[0] + 1, c[1] * 1.5), (0, x))[1]
-
-    for types in candidates:
-        try:
-            text = (
-                jax.jit(loop)
-                .lower(jnp.ones(8))
-                .compile(compiler_options={"xla_gpu_enable_command_buffer": types})
-                .as_text()
-            )
-        except Exception as error:  # noqa: BLE001 - XLA's error type varies between versions
-            print(f"command buffer types {types!r}: refused ({str(error).splitlines()[0][:120]})")
-            continue
-        lines = [line.strip()[:160] for line in text.splitlines() if "command_buffer" in line]
-        print(f"command buffer types {types!r}: accepted; {len(lines)} lines name a command buffer")
-        print("\n".join(lines[:4]))
-        return types
-    return None
 
 
 if __name__ == "__main__":

@@ -18,6 +18,9 @@ from jaxrot.comparison import RESULTS_SCHEMA
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
+# The GPU races of the order >= 4 schemes only (the rotor ones and their rivals).
+_GPU_RACE = "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a"
+
 # file -> (how its rows name the scheme, or None where its rows are not per scheme; what regenerates it)
 RESULTS = {
     "compile_cpu.json": ("method", "python benchmarks/regenerate.py --only compile"),
@@ -45,8 +48,7 @@ RESULTS = {
     # The dipole race again with 8 rotor steps per loop iteration, the order >= 4 schemes that run it.
     "gpu_h200/race_dipole_rotating_field_float64_loop8.json": (
         None,
-        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole "
-        "bash benchmarks/gpu.sh, with _rotor._GPU_LOOP_BATCH = 8",
+        f"{_GPU_RACE} STEPS=race_dipole bash benchmarks/gpu.sh, with _rotor._GPU_LOOP_BATCH = 8",
     ),
     "gpu_h200/race_viscous_drag_float64_firstpass.json": (
         None,
@@ -57,13 +59,11 @@ RESULTS = {
     "gpu_h100/rotor_loop_cmdbuf_flag.json": (None, "STEPS=command_buffers bash benchmarks/gpu.sh"),
     "gpu_h100/race_dipole_rotating_field_float64.json": (
         None,
-        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole "
-        "bash benchmarks/gpu.sh",
+        f"{_GPU_RACE} STEPS=race_dipole bash benchmarks/gpu.sh",
     ),
     "gpu_h100/race_dipole_rotating_field_float64_cmdbuf.json": (
         None,
-        "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a STEPS=race_dipole_cmdbuf "
-        "bash benchmarks/gpu.sh",
+        f"{_GPU_RACE} STEPS=race_dipole_cmdbuf bash benchmarks/gpu.sh",
     ),
 }
 

@@ -276,14 +276,14 @@ def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
     data = _read(docs, name)
     settings = list(dict.fromkeys(r["loop_batch"] for r in data["rows"]))
 
-    def label(s):
+    def describe(s):
         if isinstance(s, int):
             return f"{s} per iteration"
         if s.endswith("+cb"):
             return f"{s[:-3]} per iteration, command buffers"
         return f"no loop ({s})"
 
-    label = {s: label(s) for s in settings}
+    label = {s: describe(s) for s in settings}
     lines = [
         "| scheme | steps | " + " | ".join(label[s] for s in settings) + " |",
         "|" + "---|" * (len(settings) + 2),
