@@ -14,7 +14,11 @@
 # with 1, 2, 4 and 8 DMV steps per iteration, and with XLA's command buffers as a per-program
 # compiler option (`rotor_loop`) and as the process's flag (`command_buffers`), the race of the two
 # scenes that miss 5x on the CPU (`race_viscous`, `race_dipole`; `race_dipole_cmdbuf` with the
-# command-buffer flag for every program), then the same throughput with barriers (`barriers`). Seen on an H200
+# command-buffer flag for every program), the kernels of one step against a copy's and an exponential's
+# (`passes`; `passes_pad` with vectors built by padded sums, an experiment not kept), then the same
+# throughput with barriers (`barriers`); `throughput_defaults` is `throughput` without jaxrot's compiler
+# options. Seen on an H100 (2026-11-26, 0ed6f8e): throughput 138 s, throughput_defaults 127 s, barriers
+# 141 s, passes 31 s, passes_pad 33 s. Seen on an H200
 # (2026-11-26): throughput 102 s, rotor_loop 77 s (before its command-buffer rows), command_buffers 42 s,
 # a race about 200 s; on an H100 (2026-11-26): rotor_loop 135 s, command_buffers 45 s, race_dipole
 # 219 s, race_dipole_cmdbuf 205 s (RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a); a
@@ -23,7 +27,7 @@
 set -u
 : "${OUT:?set OUT to the folder for the results}"
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD:$PWD/.gpu_site"
-STEPS=",${STEPS:-throughput,rotor_loop,command_buffers,race_viscous,race_dipole,race_dipole_cmdbuf,barriers},"
+STEPS=",${STEPS:-throughput,throughput_defaults,rotor_loop,command_buffers,race_viscous,race_dipole,race_dipole_cmdbuf,passes,passes_pad,barriers},"
 PY=${PYTHON:-python3}
 # jaxrot reads its version from its installed metadata; the checkout is imported, not installed.
 version=$($PY -c "import tomllib; print(tomllib.load(open('pyproject.toml', 'rb'))['project']['version'])")
@@ -49,6 +53,10 @@ RACE_SCHEMES=${RACE_SCHEMES:-splitting,rkmk4,rkmk_dopri5,rkmk_dopri8,rkmk_dopri8
 TP=(benchmarks/throughput.py --n "${TP_N:-1000000,10000000}" --dtype float32 --work "${TP_WORK:-3e8}" --repeats 5)
 RACE=(benchmarks/race.py --dtype float64 --n "${RACE_N:-1000}" --time-cap 0.3 --repeats 2 --schemes "$RACE_SCHEMES")
 step throughput 150 "throughput, no barriers, jax_md" $PY "${TP[@]}" --barriers off --json "$OUT/tp_f32_nobar.json"
+# The same programs compiled with XLA's defaults instead of jaxrot.compiler_options() (on a GPU:
+# command buffers holding while loops), to show what the option does to a rollout.
+step throughput_defaults 150 "throughput, no barriers, XLA defaults" $PY "${TP[@]}" --barriers off --no-peer \
+    --xla-defaults --json "$OUT/tp_f32_nobar_xla_defaults.json"
 # Command buffers as the per-program option jaxrot.compiler_options() passes on a GPU.
 step rotor_loop 240 "rotor loop batch, and command buffers as a compiler option" $PY benchmarks/rotor_loop.py \
     --fixed-substeps 2 --command-buffers --json "$OUT/rotor_loop.json"
@@ -62,5 +70,10 @@ step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipo
 # program gets it: diffrax's adaptive loops too).
 step race_dipole_cmdbuf 260 "race dipole_rotating_field, command buffers" env XLA_FLAGS=$CB_FLAG \
     $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole_cmdbuf"
+# Kernels per step and time per particle-step against two floors (a copy, one fused exponential).
+step passes 150 "kernels per step" $PY benchmarks/gpu_passes.py --n 10000000 --out "$OUT/passes"
+# The same with vectors assembled by sums of padded pieces instead of concatenations (experiment).
+step passes_pad 150 "kernels per step, padded sums" $PY benchmarks/gpu_passes.py --n 10000000 --pad-concat \
+    --out "$OUT/passes_pad"
 step barriers 150 "throughput, barriers" $PY "${TP[@]}" --barriers on --no-peer --json "$OUT/tp_f32_bar.json"
 ls -R "$OUT"

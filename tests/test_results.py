@@ -65,6 +65,10 @@ RESULTS = {
         None,
         f"{_GPU_RACE} STEPS=race_dipole_cmdbuf bash benchmarks/gpu.sh",
     ),
+    # From 0ed6f8e on an H100: throughput as `rollout` compiles it (command buffers on), and the
+    # kernels per step of four schemes and jax_md against two floors.
+    "gpu_h100/tp_f32_nobar_jax_md.json": ("method", "STEPS=throughput bash benchmarks/gpu.sh"),
+    "gpu_h100/passes.json": (None, "STEPS=passes bash benchmarks/gpu.sh"),
 }
 
 

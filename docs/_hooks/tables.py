@@ -270,6 +270,44 @@ def gpu_peer_throughput_table(docs, name="gpu_h200/tp_f32_nobar_jax_md.json"):
     return "\n".join(lines)
 
 
+def gpu_throughput_ratio_table(docs, name, base):
+    """M particle-steps/s of each jaxrot scheme in ``docs/name`` and, in brackets, the factor over
+    the same scheme in ``docs/base``: two throughput runs of one GPU session differing in one setting."""
+    data, ref = _read(docs, name), _read(docs, base)
+    rate = {(r["dtype"], r["n"], r["method"]): r["particle_steps_per_s"] for r in ref["rows"]}
+    methods = [m for m in dict.fromkeys(r["method"] for r in data["rows"]) if m != "jax_md"]
+    lines = ["| dtype | N | " + " | ".join(methods) + " |", "|" + "---|" * (len(methods) + 2)]
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in data["rows"]):
+        by = {
+            r["method"]: r["particle_steps_per_s"] for r in data["rows"] if (r["dtype"], r["n"]) == (dtype, n)
+        }
+        cells = [f"{by[m] / 1e6:.3g} ({by[m] / rate[(dtype, n, m)]:.2f}×)" for m in methods]
+        lines.append(f"| {dtype} | {_power_of_ten(n)} | " + " | ".join(cells) + " |")
+    m = data["machine"]
+    lines.append(
+        f"\n*From `docs/{name}` over `docs/{base}`: {m['device']}, Python {m['python']}, jax {m['jax']}.*"
+    )
+    return "\n".join(lines)
+
+
+def gpu_passes_table(docs, name="gpu_h100/passes.json"):
+    """Kernels in one step's loop body and time per particle-step (`benchmarks/gpu_passes.py`)."""
+    data = _read(docs, name)
+    lines = [
+        "| program | fusions | copies, transposes | ns per particle-step "
+        "| bytes per particle-step at the card's bandwidth |",
+        "|---|---|---|---|---|",
+    ]
+    for r in data["rows"]:
+        lines.append(
+            f"| {r['program']} | {r['fusion']} | {r['copy/transpose']} | {r['ns_per_particle_step']:.3f} "
+            f"| {r['bytes_at_bandwidth']:.0f} |"
+        )
+    m = data["machine"]
+    lines.append(f"\n*From `docs/{name}`: N = {data['n']:.0e}, float32, {m['device']}, jax {m['jax']}.*")
+    return "\n".join(lines)
+
+
 def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
     """ms per run of the rotor schemes for each setting of the rotor's while loop (DMV steps per
     iteration; ``fixedK``: no loop, K steps), and the factor over one step per iteration."""
@@ -705,6 +743,8 @@ TABLES = {
     "gpu_race_table": gpu_race_table,
     "gpu_peer_throughput_table": gpu_peer_throughput_table,
     "gpu_rotor_loop_table": gpu_rotor_loop_table,
+    "gpu_throughput_ratio_table": gpu_throughput_ratio_table,
+    "gpu_passes_table": gpu_passes_table,
     "race_table_float64": race_table_float64,
     "race_table_float32": race_table_float32,
     "race_summary": race_summary,

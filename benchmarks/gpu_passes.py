@@ -1,0 +1,141 @@
+"""How many kernels a throughput step launches on a GPU, and how far it is from one pass.
+
+For each program of `benchmarks/throughput.py` (a `jaxrot.rollout` of N heavy tops, or jax_md's
+NVE), writes the optimised HLO of the compiled program to ``--out`` and prints the kernels in its
+loop body (fusions and other launches), the run time per particle-step, and what the card would
+move per particle-step at ``--bandwidth`` in that time. Two floors are timed beside them in the same
+process: ``copy``, a step that only rescales the state (one read and one write of q and ω), and
+``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic, fused).
+
+    python benchmarks/gpu_passes.py --n 10000000 --out /tmp/hlo
+"""
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp
+from throughput import bodies, have_jax_md, jax_md_run, jaxrot_run
+
+import jaxrot
+from jaxrot import quaternion as quat
+from jaxrot.comparison import machine_info, time_runs
+
+
+class _PaddedConcat:
+    """``jax.numpy`` with `stack` and `concatenate` along the last axis written as sums of padded
+    pieces (elementwise work XLA can fuse), everything else passed through: an experiment on how
+    XLA:GPU fuses a step whose quaternion arithmetic assembles its results component by component."""
+
+    def __getattr__(self, name):
+        return getattr(jnp, name)
+
+    def stack(self, arrays, axis=0):
+        arrays = [jnp.asarray(a) for a in arrays]
+        if axis in (-1, arrays[0].ndim):
+            return self.concatenate([a[..., None] for a in arrays], axis=-1)
+        return jnp.stack(arrays, axis=axis)
+
+    def concatenate(self, arrays, axis=0):
+        arrays = [jnp.asarray(a) for a in arrays]
+        if axis not in (-1, arrays[0].ndim - 1):
+            return jnp.concatenate(arrays, axis=axis)
+        total = sum(a.shape[-1] for a in arrays)
+        out, offset = 0, 0
+        for a in arrays:
+            width = a.shape[-1]
+            out = out + jnp.pad(a, [(0, 0)] * (a.ndim - 1) + [(offset, total - offset - width)])
+            offset += width
+        return out
+
+
+def pad_concatenations():
+    """Route every jaxrot module's `jnp.stack`/`jnp.concatenate` through `_PaddedConcat`."""
+    import sys
+
+    proxy = _PaddedConcat()
+    for name, module in list(sys.modules.items()):
+        if name.startswith("jaxrot") and getattr(module, "jnp", None) is jnp:
+            module.jnp = proxy
+
+
+def floor_run(kind, n_steps):
+    def step(_, s):
+        q, w = s
+        if kind == "copy":
+            return q * 1.0000001, w * 0.9999999
+        return quat.multiply(q, quat.exp(0.5e-3 * quat.rotate(quat.conjugate(q), w))), w
+
+    def run(state):
+        return jax.lax.fori_loop(0, n_steps, step, (state.q, state.omega))[0]
+
+    return run
+
+
+def kernels(hlo):
+    """Kernel launches of the largest computation called by a while loop (the step), by kind."""
+    bodies_ = re.findall(r"while\(.*?body=%?([\w.\-]+)", hlo)
+    blocks = dict(re.findall(r"\n(?:ENTRY )?%?([\w.\-]+) [^\n]*\{\n(.*?)\n\}", hlo, flags=re.S))
+    counts = {}
+    for name in bodies_:
+        text = blocks.get(name, "")
+        c = {
+            "fusion": len(re.findall(r"= [^\n]* fusion\(", text)),
+            "custom-call": len(re.findall(r"custom-call\(", text)),
+            "copy/transpose": len(re.findall(r"= [^\n]* (?:copy|transpose)\(", text)),
+            "while": len(re.findall(r"while\(", text)),
+            "instructions": text.count("\n") + 1,
+        }
+        if c["instructions"] > counts.get("instructions", 0):
+            counts = c | {"body": name}
+    return counts
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--n", type=int, default=10_000_000)
+    p.add_argument("--steps", type=int, default=30)
+    p.add_argument("--schemes", default="euler,zhao,no_squish,splitting")
+    p.add_argument("--bandwidth", type=float, default=3.35e12, help="bytes/s of the card (H100 SXM: 3.35e12)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--pad-concat", action="store_true", help="assemble vectors by padded sums (experiment)")
+    ns = p.parse_args()
+    if ns.pad_concat:
+        pad_concatenations()
+    out = Path(ns.out)
+    out.mkdir(parents=True, exist_ok=True)
+    state, scene = bodies(ns.n, jnp.float32)
+    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp")}
+    runs |= {s: jaxrot_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
+    if have_jax_md():
+        runs["jax_md"] = jax_md_run(scene, ns.steps)
+    rows = []
+    print(machine_info())
+    for name, run in runs.items():
+        options = None if name == "jax_md" else jaxrot.compiler_options()
+        compiled = jax.jit(run, compiler_options=options).lower(state).compile()
+        hlo = compiled.as_text()
+        (out / f"{name}.hlo.txt").write_text(hlo)
+        _, seconds = time_runs(compiled, (state,), 5)
+        ns_per = seconds / (ns.n * ns.steps) * 1e9
+        row = {
+            "program": name,
+            "ns_per_particle_step": ns_per,
+            "bytes_at_bandwidth": ns_per * 1e-9 * ns.bandwidth,
+        }
+        row |= kernels(hlo)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    (out / "passes.json").write_text(
+        json.dumps({"machine": machine_info(), "n": ns.n, "rows": rows}, indent=1)
+    )
+
+
+if __name__ == "__main__":
+    main()
