@@ -31,6 +31,7 @@ RESULTS = {
         None,
         "python benchmarks/regenerate.py --only throughput_jax010_xla_defaults",
     ),
+    "cpu_vector_width.json": ("scheme", "python benchmarks/cpu_options.py --json docs/cpu_vector_width.json"),
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),

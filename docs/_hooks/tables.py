@@ -308,6 +308,24 @@ def gpu_passes_table(docs, name="gpu_h100/passes.json"):
     return "\n".join(lines)
 
 
+def cpu_vector_width_table(docs, name="cpu_vector_width.json"):
+    """Throughput with 512-bit vectors over XLA:CPU's 256, per scheme (`benchmarks/cpu_options.py`)."""
+    data = _read(docs, name)
+    schemes = list(dict.fromkeys(r["scheme"] for r in data["rows"]))
+    lines = ["| dtype | N | " + " | ".join(schemes) + " |", "|" + "---|" * (len(schemes) + 2)]
+    for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in data["rows"]):
+        by = {r["scheme"]: r for r in data["rows"] if (r["dtype"], r["n"]) == (dtype, n)}
+        cells = [f"{by[s]['rate_512'] / by[s]['rate_256']:.2f}" for s in schemes]
+        lines.append(f"| {dtype} | {_power_of_ten(n)} | " + " | ".join(cells) + " |")
+    m = data["machine"]
+    same = f"final states the same bits in {sum(r['same_bits'] for r in data['rows'])} of {len(data['rows'])} cells"
+    lines.append(
+        f"\n*From `docs/{name}`: {m['cpu_model']} ({m['cpus']} cores, AVX-512 {m['avx512f']}), "
+        f"Python {m['python']}, jax {m['jax']}; {same}.*"
+    )
+    return "\n".join(lines)
+
+
 def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
     """ms per run of the rotor schemes for each setting of the rotor's while loop (DMV steps per
     iteration; ``fixedK``: no loop, K steps), and the factor over one step per iteration."""
@@ -745,6 +763,7 @@ TABLES = {
     "gpu_rotor_loop_table": gpu_rotor_loop_table,
     "gpu_throughput_ratio_table": gpu_throughput_ratio_table,
     "gpu_passes_table": gpu_passes_table,
+    "cpu_vector_width_table": cpu_vector_width_table,
     "race_table_float64": race_table_float64,
     "race_table_float32": race_table_float32,
     "race_summary": race_summary,
