@@ -318,7 +318,8 @@ def cpu_vector_width_table(docs, name="cpu_vector_width.json"):
         cells = [f"{by[s]['rate_512'] / by[s]['rate_256']:.2f}" for s in schemes]
         lines.append(f"| {dtype} | {_power_of_ten(n)} | " + " | ".join(cells) + " |")
     m = data["machine"]
-    same = f"final states the same bits in {sum(r['same_bits'] for r in data['rows'])} of {len(data['rows'])} cells"
+    n_same = sum(r["same_bits"] for r in data["rows"])
+    same = f"final states the same bits in {n_same} of {len(data['rows'])} cells"
     lines.append(
         f"\n*From `docs/{name}`: {m['cpu_model']} ({m['cpus']} cores, AVX-512 {m['avx512f']}), "
         f"Python {m['python']}, jax {m['jax']}; {same}.*"
