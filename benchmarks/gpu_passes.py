@@ -4,8 +4,9 @@ For each program of `benchmarks/throughput.py` (a `jaxrot.rollout` of N heavy to
 NVE), writes the optimised HLO of the compiled program to ``--out`` and prints the kernels in its
 loop body (fusions and other launches), the run time per particle-step, and what the card would
 move per particle-step at ``--bandwidth`` in that time. Two floors are timed beside them in the same
-process: ``copy``, a step that only rescales the state (one read and one write of q and ω), and
-``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic, fused).
+process: ``copy``, a step that only rescales the state (one read and one write of q and ω),
+``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic), and
+``soa_exp``, the same step on q and ω split into their components (structure of arrays).
 
     python benchmarks/gpu_passes.py --n 10000000 --out /tmp/hlo
 """
@@ -25,6 +26,8 @@ from throughput import bodies, have_jax_md, jax_md_run, jaxrot_run
 
 import jaxrot
 from jaxrot import quaternion as quat
+from jaxrot._math import taylor_threshold
+from jaxrot._trig import sincos
 from jaxrot.comparison import machine_info, time_runs
 
 
@@ -65,14 +68,53 @@ def pad_concatenations():
             module.jnp = proxy
 
 
+def _soa_multiply(a, b):
+    a0, a1, a2, a3 = a
+    b0, b1, b2, b3 = b
+    return (
+        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+    )
+
+
+def _soa_exp(v):
+    """`quat.exp` on components: the same branches and kernels, no (N, 4) array."""
+    x, y, z = v
+    theta_sq = x * x + y * y + z * z
+    use_taylor = theta_sq < taylor_threshold(x.dtype)
+    theta = jnp.sqrt(jnp.where(use_taylor, 1, theta_sq))
+    sin_half, cos_half = sincos(0.5 * theta)
+    real = jnp.where(use_taylor, 1 - theta_sq / 8 + theta_sq**2 / 384, cos_half)
+    factor = jnp.where(use_taylor, 0.5 - theta_sq / 48 + theta_sq**2 / 3840, sin_half / theta)
+    return real, factor * x, factor * y, factor * z
+
+
+def _soa_step(q, w):
+    """`floor_run`'s exponential step with q and ω as tuples of (N,) components (structure of arrays)."""
+    conj = (q[0], -q[1], -q[2], -q[3])
+    w_body = _soa_multiply(_soa_multiply(conj, (jnp.zeros_like(q[0]), *w)), q)[1:]
+    return _soa_multiply(q, _soa_exp(tuple(0.5e-3 * c for c in w_body)))
+
+
 def floor_run(kind, n_steps):
+    """A floor step: ``copy`` rescales q and ω; ``elementwise_exp`` turns q by ``exp(½ Δt ω_body)``
+    with jaxrot's quaternion functions; ``soa_exp`` the same on components (q, ω split into (N,)
+    arrays before the loop and stacked after it), to see whether that layout fuses into fewer kernels."""
+
     def step(_, s):
         q, w = s
         if kind == "copy":
             return q * 1.0000001, w * 0.9999999
+        if kind == "soa_exp":
+            return _soa_step(q, w), w
         return quat.multiply(q, quat.exp(0.5e-3 * quat.rotate(quat.conjugate(q), w))), w
 
     def run(state):
+        if kind == "soa_exp":
+            split = (tuple(state.q[:, i] for i in range(4)), tuple(state.omega[:, i] for i in range(3)))
+            return jnp.stack(jax.lax.fori_loop(0, n_steps, step, split)[0], axis=-1)
         return jax.lax.fori_loop(0, n_steps, step, (state.q, state.omega))[0]
 
     return run
@@ -111,7 +153,7 @@ def main():
     out = Path(ns.out)
     out.mkdir(parents=True, exist_ok=True)
     state, scene = bodies(ns.n, jnp.float32)
-    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp")}
+    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp", "soa_exp")}
     runs |= {s: jaxrot_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
     if have_jax_md():
         runs["jax_md"] = jax_md_run(scene, ns.steps)
