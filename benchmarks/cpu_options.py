@@ -26,17 +26,28 @@ from throughput import bodies, jaxrot_run
 from tqdm import tqdm
 
 import jaxrot
-from jaxrot import _compile
 from jaxrot.comparison import machine_info, time_runs
 
 
+def cpu_description():
+    """``(model name, whether the CPU has AVX-512F)`` from Linux's /proc/cpuinfo (``("?", False)``
+    where there is none)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return "?", False
+    model = next((line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")), "?")
+    return model, any(line.startswith("flags") and "avx512f" in line.split() for line in lines)
+
+
 def measure(cells, schemes, work, rounds):
+    base = jaxrot.compiler_options("cpu")
     rows = []
     for dtype_name, n in tqdm(cells, desc="vector width"):
         state, scene = bodies(n, {"float32": jnp.float32, "float64": jnp.float64}[dtype_name])
         steps = int(np.clip(work // n, 10, 10_000))
         for scheme in schemes:
-            base = jaxrot.compiler_options("cpu")
             programs = {
                 width: jax.jit(
                     jaxrot_run(scheme, scene, steps),
@@ -87,9 +98,7 @@ def main(argv=None):
     parser.add_argument("--json", default=None)
     ns = parser.parse_args(argv)
     cells = [(c.split(":")[0], int(c.split(":")[1])) for c in ns.cells.split(",")]
-    cpuinfo = _compile._cpuinfo().splitlines()
-    model = next((line.split(":", 1)[1].strip() for line in cpuinfo if line.startswith("model name")), "?")
-    avx512 = any(line.startswith("flags") and "avx512f" in line.split() for line in cpuinfo)
+    model, avx512 = cpu_description()
     info = machine_info() | {
         "cpu_model": model,
         "avx512f": avx512,

@@ -70,7 +70,8 @@ step race_dipole 260 "race dipole_rotating_field" $PY "${RACE[@]}" --scenes dipo
 # program gets it: diffrax's adaptive loops too).
 step race_dipole_cmdbuf 260 "race dipole_rotating_field, command buffers" env XLA_FLAGS=$CB_FLAG \
     $PY "${RACE[@]}" --scenes dipole_rotating_field --out "$OUT/race_dipole_cmdbuf"
-# Kernels per step and time per particle-step against two floors (a copy, one fused exponential).
+# Kernels per step and time per particle-step against three floors (a copy, one
+# exponential with jaxrot's quaternion functions, the same on components).
 step passes 150 "kernels per step" $PY benchmarks/gpu_passes.py --n 10000000 --out "$OUT/passes"
 # The same with vectors assembled by sums of padded pieces instead of concatenations (experiment).
 step passes_pad 150 "kernels per step, padded sums" $PY benchmarks/gpu_passes.py --n 10000000 --pad-concat \

@@ -3,7 +3,7 @@
 For each program of `benchmarks/throughput.py` (a `jaxrot.rollout` of N heavy tops, or jax_md's
 NVE), writes the optimised HLO of the compiled program to ``--out`` and prints the kernels in its
 loop body (fusions and other launches), the run time per particle-step, and what the card would
-move per particle-step at ``--bandwidth`` in that time. Two floors are timed beside them in the same
+move per particle-step at ``--bandwidth`` in that time. Three floors are timed beside them in the same
 process: ``copy``, a step that only rescales the state (one read and one write of q and ω),
 ``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic), and
 ``soa_exp``, the same step on q and ω split into their components (structure of arrays).
@@ -14,6 +14,7 @@ process: ``copy``, a step that only rescales the state (one read and one write o
 import argparse
 import json
 import re
+import sys
 from pathlib import Path
 
 import jax
@@ -60,8 +61,6 @@ class _PaddedConcat:
 
 def pad_concatenations():
     """Route every jaxrot module's `jnp.stack`/`jnp.concatenate` through `_PaddedConcat`."""
-    import sys
-
     proxy = _PaddedConcat()
     for name, module in list(sys.modules.items()):
         if name.startswith("jaxrot") and getattr(module, "jnp", None) is jnp:
