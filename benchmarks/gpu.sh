@@ -18,7 +18,7 @@
 # (`passes`; `passes_pad` with vectors built by padded sums, an experiment not kept), then the same
 # throughput with barriers (`barriers`); `throughput_defaults` is `throughput` without jaxrot's compiler
 # options. Seen on an H100 (2026-11-26, 0ed6f8e): throughput 138 s, throughput_defaults 127 s, barriers
-# 141 s, passes 31 s, passes_pad 33 s. Seen on an H200
+# 141 s, passes 31 s (47 s with the component-major programs, d0e1d6a+), passes_pad 33 s. Seen on an H200
 # (2026-11-26): throughput 102 s, rotor_loop 77 s (before its command-buffer rows), command_buffers 42 s,
 # a race about 200 s; on an H100 (2026-11-26): rotor_loop 135 s, command_buffers 45 s, race_dipole
 # 219 s, race_dipole_cmdbuf 205 s (RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14a); a

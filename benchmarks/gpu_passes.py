@@ -3,10 +3,13 @@
 For each program of `benchmarks/throughput.py` (a `jaxrot.rollout` of N heavy tops, or jax_md's
 NVE), writes the optimised HLO of the compiled program to ``--out`` and prints the kernels in its
 loop body (fusions and other launches), the run time per particle-step, and what the card would
-move per particle-step at ``--bandwidth`` in that time. Three floors are timed beside them in the same
+move per particle-step at ``--bandwidth`` in that time. Four floors are timed beside them in the same
 process: ``copy``, a step that only rescales the state (one read and one write of q and ω),
 ``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic), and
-``soa_exp``, the same step on q and ω split into their components (structure of arrays).
+``soa_exp``, the same step on q and ω split into their components (structure of arrays), and
+``cm_exp``, the same step with the particle axis last (carry ``(4, N)``, the per-body code vmapped
+over the last axis). The ``cm_<scheme>`` programs run each scheme so (`component_major_run`), with the
+largest difference of their final orientations from the original's in the row.
 
     python benchmarks/gpu_passes.py --n 10000000 --out /tmp/hlo
 """
@@ -23,13 +26,15 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
-from throughput import bodies, have_jax_md, jax_md_run, jaxrot_run
+from throughput import DT, bodies, have_jax_md, jax_md_run, jaxrot_run
 
 import jaxrot
 from jaxrot import quaternion as quat
+from jaxrot._inertia import body_inertia
 from jaxrot._math import taylor_threshold
 from jaxrot._trig import sincos
 from jaxrot.comparison import machine_info, time_runs
+from jaxrot.schemes import resolve_scheme
 
 
 class _PaddedConcat:
@@ -108,13 +113,40 @@ def floor_run(kind, n_steps):
             return q * 1.0000001, w * 0.9999999
         if kind == "soa_exp":
             return _soa_step(q, w), w
-        return quat.multiply(q, quat.exp(0.5e-3 * quat.rotate(quat.conjugate(q), w))), w
+        one = lambda q, w: quat.multiply(q, quat.exp(0.5e-3 * quat.rotate(quat.conjugate(q), w)))  # noqa: E731
+        if kind == "cm_exp":
+            return jax.vmap(one, in_axes=-1, out_axes=-1)(q, w), w
+        return one(q, w), w
 
     def run(state):
+        if kind == "cm_exp":
+            return jax.lax.fori_loop(0, n_steps, step, (state.q.T, state.omega.T))[0].T
         if kind == "soa_exp":
             split = (tuple(state.q[:, i] for i in range(4)), tuple(state.omega[:, i] for i in range(3)))
             return jnp.stack(jax.lax.fori_loop(0, n_steps, step, split)[0], axis=-1)
         return jax.lax.fori_loop(0, n_steps, step, (state.q, state.omega))[0]
+
+    return run
+
+
+def component_major_run(name, scene, n_steps):
+    """A scheme's loop with the particle axis last: the carry ``(4, N)``, ``(3, N)``, … and the
+    per-body step vmapped over that axis (``in_axes=-1``), so that a quaternion's components are
+    rows, not ``(N, 1)`` columns; the same arithmetic per body as `jaxrot.rollout`."""
+    scheme = resolve_scheme(name)
+    inertia = body_inertia(scene.inertia)
+
+    def run(state):
+        carry = jax.vmap(lambda s: scheme.init(s, 0.0, inertia, scene.torque, scene.args))(state)
+        carry = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, -1), carry)
+
+        def step_one(c, t):
+            return scheme.step(c, t, DT, inertia, scene.torque, scene.args)
+
+        step = jax.vmap(step_one, in_axes=(-1, None), out_axes=-1)
+        carry = jax.lax.fori_loop(0, n_steps, lambda i, c: step(c, i * DT), carry)
+        carry = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, -1, 0), carry)
+        return jax.vmap(scheme.state)(carry).q
 
     return run
 
@@ -152,18 +184,21 @@ def main():
     out = Path(ns.out)
     out.mkdir(parents=True, exist_ok=True)
     state, scene = bodies(ns.n, jnp.float32)
-    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp", "soa_exp")}
+    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp", "soa_exp", "cm_exp")}
+    # cm_…: the same step with the particle axis last (component_major_run), checked against the original
     runs |= {s: jaxrot_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
+    runs |= {f"cm_{s}": component_major_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
     if have_jax_md():
         runs["jax_md"] = jax_md_run(scene, ns.steps)
-    rows = []
+    rows, finals = [], {}
     print(machine_info())
     for name, run in runs.items():
         options = None if name == "jax_md" else jaxrot.compiler_options()
         compiled = jax.jit(run, compiler_options=options).lower(state).compile()
         hlo = compiled.as_text()
         (out / f"{name}.hlo.txt").write_text(hlo)
-        _, seconds = time_runs(compiled, (state,), 5)
+        final, seconds = time_runs(compiled, (state,), 5)
+        finals[name] = final
         ns_per = seconds / (ns.n * ns.steps) * 1e9
         row = {
             "program": name,
@@ -171,6 +206,11 @@ def main():
             "bytes_at_bandwidth": ns_per * 1e-9 * ns.bandwidth,
         }
         row |= kernels(hlo)
+        twin = {"floor_cm_exp": "floor_elementwise_exp"}.get(
+            name, name[3:] if name.startswith("cm_") else None
+        )
+        if twin in finals:
+            row["max_abs_diff_vs_" + twin] = float(jnp.max(jnp.abs(final - finals[twin])))
         rows.append(row)
         print(json.dumps(row), flush=True)
     (out / "passes.json").write_text(

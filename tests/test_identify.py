@@ -325,6 +325,24 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
     assert float(jnp.max(jnp.abs(full[:rows, 7 + 3 : 7 + 6]))) == 0.0
 
 
+@pytest.mark.parametrize("m", [1, 2, 13, 64, 65])
+def test_control_interpolation_is_numpys_interp(m):
+    """The known torque between its samples: linear, held outside, as `np.interp`, for records short
+    enough for the sum of ramps (m ≤ 64) and past it (jnp.interp). The ramp sum adds up to m − 1
+    terms of size ≤ 2 max|τ| (each rounded, plus the ramp's own rounding): inside 4 m eps max|τ|."""
+    from jaxrot._fit._identify_model import RAMP_SUM_MAX_SAMPLES, interpolate_control
+
+    assert RAMP_SUM_MAX_SAMPLES == 64  # the parametrisation straddles it
+    rng = np.random.default_rng(m)
+    t_c = np.cumsum(rng.uniform(0.1, 2.0, m))
+    tau_c = rng.normal(size=(m, 3))
+    t = np.concatenate([np.linspace(t_c[0] - 3.0, t_c[-1] + 3.0, 301), t_c])
+    got = jax.jit(jax.vmap(interpolate_control, in_axes=(0, None, None)))(t, t_c, tau_c)
+    expected = np.stack([np.interp(t, t_c, tau_c[:, i]) for i in range(3)], axis=-1)
+    eps = np.finfo(np.float64).eps
+    np.testing.assert_allclose(got, expected, rtol=0, atol=4 * m * eps * np.abs(tau_c).max())
+
+
 @pytest.mark.slow
 def test_a_model_error_above_round_off_still_stops_converged():
     """Noise-free satellite data fitted with rkmk_dopri5 at three steps per sample: the model error
