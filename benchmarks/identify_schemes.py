@@ -31,13 +31,14 @@ noisy, _ = satellite_experiments(0)
 args = {"dipole": jnp.zeros(3)}
 ref = jaxrot.identify(noisy, torque=dipole_torque, args=args, free_args={"dipole": True}, scheme="rkmk4")
 print("| scheme | step angle | substeps | bias / se (max over inertia, dipole) | run s | first call s |")
-ANGLES = {
-    "zhao": [0.05, 0.2],
-    "rkmk4": [0.05, 0.2, 0.5],
-    "rkmk_dopri5": [0.15, 0.3, 0.6],
-    "splitting": [0.05],
+ANGLES = {  # label: (scheme, step angles in rad)
+    "zhao": ("zhao", [0.05, 0.2]),
+    "rkmk4": ("rkmk4", [0.05, 0.2, 0.5]),
+    "rkmk_dopri5": ("rkmk_dopri5", [0.15, 0.3, 0.6]),
+    'RKMKDopri5(chart="cayley")': (jaxrot.schemes.RKMKDopri5(chart="cayley"), [0.3, 0.6]),
+    "splitting": ("splitting", [0.05]),
 }
-for scheme, angles in ANGLES.items():
+for label, (scheme, angles) in ANGLES.items():
     for angle in angles:
         identify_module.DEFAULT_STEP_ANGLE = angle
         try:
@@ -51,12 +52,12 @@ for scheme, angles in ANGLES.items():
             )
             t2 = time.perf_counter()
         except Exception as e:
-            print(scheme, angle, "error", type(e).__name__, str(e)[:200])
+            print(label, angle, "error", type(e).__name__, str(e)[:200])
             continue
         bias = max(
             np.max(np.abs(np.asarray(fit.inertia) - SATELLITE_INERTIA) / ref.stderr.inertia),
             np.max(np.abs(np.asarray(fit.args["dipole"]) - SATELLITE_DIPOLE) / ref.stderr.args["dipole"]),
         )
         substeps = round(600 / 120 / fit.dt)
-        row = f"| {scheme} | {angle} | {substeps} | {bias:.2g} | {t2 - t1:.2f} | {t1 - t0:.1f} |"
+        row = f"| {label} | {angle} | {substeps} | {bias:.2g} | {t2 - t1:.2f} | {t1 - t0:.1f} |"
         print(row, "converged" if fit.converged else "NOT converged", flush=True)

@@ -1,14 +1,16 @@
-"""`jaxrot._fit._optimiser.gauss_newton` on problems small enough to follow by hand.
+"""`jaxrot._fit._optimiser`: `gauss_newton` on problems small enough to follow by hand, and its step.
 
 ``r(z) = arctan(z)`` from ``z₀ = 3``: the full Gauss–Newton step ``−arctan(z)(1 + z²)`` overshoots
 to ``z ≈ −9.5`` (a larger objective), so Armijo's search halves it twice before accepting; then
 the iteration converges to the root ``z = 0``.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
-from jaxrot._fit._optimiser import MAX_REJECTIONS, gauss_newton
+from jaxrot._fit._optimiser import MAX_REJECTIONS, _least_squares_step, gauss_newton
 
 
 def arctan_residual(z, data):
@@ -65,3 +67,31 @@ def test_a_nan_start_stops_unconverged_after_the_rejections():
     assert int(n) == 0 and not bool(converged)
     assert np.isnan(float(history[0]))
     assert MAX_REJECTIONS > 0 and np.isnan(float(z[0]))
+
+
+@pytest.mark.parametrize("shape", [(200, 6), (6, 6)])  # tall: R and Qᵀr from [J | r]; square: Q formed
+def test_least_squares_step_is_numpys_lstsq(shape):
+    """The Gauss–Newton step ``d = argmin |J d + r|`` against `np.linalg.lstsq`, with column scales
+    spread over 4 decades (as identify's Jacobians): a backward-stable solve of condition κ ≈ 1e4
+    is within a few κ eps of another, relative to |d|; 1e3 κ eps is that with margin."""
+    rng = np.random.default_rng(shape[0])
+    jac = rng.normal(size=shape) * np.logspace(0, 4, shape[1])
+    r = rng.normal(size=shape[0])
+    expected = -np.linalg.lstsq(jac, r, rcond=None)[0]
+    bound = 1e3 * np.linalg.cond(jac) * np.finfo(np.float64).eps * np.abs(expected).max()
+    for minimum_norm in (True, False):
+        d = jax.jit(_least_squares_step, static_argnums=2)(jac, r, minimum_norm)
+        np.testing.assert_allclose(d, expected, rtol=0, atol=bound)
+
+
+def test_least_squares_step_of_a_rank_deficient_jacobian_is_the_minimum_norm_one():
+    """Two equal columns: the data fix only their sum; the minimum-norm step splits it evenly, as
+    the pseudo-inverse does (`np.linalg.lstsq`), and does not move along their difference."""
+    rng = np.random.default_rng(3)
+    jac = rng.normal(size=(50, 4))
+    jac[:, 3] = jac[:, 2]
+    r = rng.normal(size=50)
+    d = jax.jit(_least_squares_step, static_argnums=2)(jac, r, True)
+    expected = -np.linalg.lstsq(jac, r, rcond=None)[0]
+    np.testing.assert_allclose(d, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert abs(float(d[2] - d[3])) < 1e-12 * np.abs(expected).max()

@@ -13,7 +13,7 @@ import numpy as np
 from .. import quaternion as quat
 from .._state import Trajectory
 from .._validation import check_inertia_values, check_int, check_torque, sign_continuous
-from ..schemes import resolve_scheme
+from ..schemes import RKMKDopri5, resolve_scheme
 from ._experiment import KINDS, Experiment
 from ._identify_model import (
     ControlledTorque,
@@ -32,7 +32,7 @@ from ._uncertainty import analyse, correlations, propagate
 
 
 # The default scheme and step: see `identify`'s docstring for the measurements behind them.
-DEFAULT_SCHEME = "rkmk_dopri5"
+DEFAULT_SCHEME = RKMKDopri5(chart="cayley")
 DEFAULT_STEP_ANGLE = 0.6  # rad turned per step at the largest |ω| seen
 
 
@@ -254,32 +254,37 @@ def identify(
     times the largest are undetermined: the parameters they move are listed in
     ``unidentified``, get infinite standard errors and a warning.
 
-    Default scheme: ``"rkmk_dopri5"`` (fifth-order Lie-group Runge–Kutta) at
-    steps turning the body by at most 0.6 rad at the largest ``|ω|`` seen.
-    Measured on the three-manoeuvre satellite of ``tests/_telemetry.py``
-    (noise-free data from the reference solver, 5 s sample spacing, |ω| ≤ 0.12
-    rad/s; bias = the largest parameter error in standard errors of the noisy
-    fit; 2-core CPU, float64, one run each; reproduced by
-    ``benchmarks/identify_schemes.py``):
+    Default scheme: ``RKMKDopri5(chart="cayley")`` (fifth-order Lie-group Runge–Kutta
+    in Cayley coordinates, `jaxrot.schemes.RKMKDopri5`) at steps turning the body by at
+    most 0.6 rad at the largest ``|ω|`` seen. Measured on the three-manoeuvre satellite
+    of ``tests/_telemetry.py`` (noise-free data from the reference solver, 5 s sample
+    spacing, |ω| ≤ 0.12 rad/s; bias = the largest parameter error in standard errors of
+    the noisy fit; 2-core CPU, float64, one run each, so fit times within ±20 % are
+    noise; reproduced by ``benchmarks/identify_schemes.py``):
 
     ===========  ==========  ========  =================  =======  ==============
     scheme       step (rad)  substeps  bias / std. error  fit (s)  first call (s)
     ===========  ==========  ========  =================  =======  ==============
-    zhao         0.05        9         4.3                0.21     4.7
-    zhao         0.2         3         38                 0.12     6.4
-    rkmk4        0.05        9         8e-5               0.46     6.6
-    rkmk4        0.2         3         0.0066             0.16     6.3
-    rkmk4        0.5         1         0.6                0.11     —
-    rkmk_dopri5  0.15        3         3e-5               0.20     6.6
-    rkmk_dopri5  0.3         2         8e-5               0.21     6.8
-    rkmk_dopri5  0.6         1         0.0015             0.14     6.4
-    splitting    0.05        9         0.46               0.57     14.3
+    zhao         0.05        9         4.3                0.22     4.0
+    zhao         0.2         3         38                 0.11     4.6
+    rkmk4        0.05        9         8e-5               0.41     5.9
+    rkmk4        0.2         3         0.0066             0.14     5.8
+    rkmk4        0.5         1         0.6                0.10     —
+    rkmk_dopri5  0.15        3         3e-5               0.25     5.7
+    rkmk_dopri5  0.3         2         8e-5               0.17     5.7
+    rkmk_dopri5  0.6         1         0.0015             0.10     5.2
+    … cayley     0.3         2         2e-4               0.16     5.8
+    … cayley     0.6         1         0.0066             0.11     4.8
+    splitting    0.05        9         0.46               0.33     12.2
     ===========  ==========  ========  =================  =======  ==============
 
-    Second-order schemes bias the fit by several standard errors at any step
-    that runs as fast; ``rkmk_dopri5`` at one step per sample leaves a bias
-    of 0.15 % of a standard error with the fewest stages per sample (6, against
-    ``rkmk4``'s 12 at 0.2 rad), and compiles as fast as ``rkmk4`` (6–7 s here).
+    (``… cayley``: ``RKMKDopri5(chart="cayley")``.) Second-order schemes bias the fit by
+    several standard errors at any step that runs as fast; the fifth-order pair at one
+    step per sample leaves a bias under 1 % of a standard error with the fewest stages
+    per sample (6, against ``rkmk4``'s 12 at 0.2 rad). Of its two charts, the Cayley
+    map (rational, no trigonometry) biases 4× more (0.66 % of a standard error against
+    0.15 %) and its Jacobian rollout, the cost of each iteration, runs 1.24× faster
+    (8.45 against 10.46 ms, median of 15 interleaved rounds, same process).
 
     Args:
         experiments: one `jaxrot.Experiment` or a sequence of them.

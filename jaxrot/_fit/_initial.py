@@ -51,14 +51,18 @@ def estimate_omega(t, q):
     # interior: points at -a, 0, +b
     a = (t[1:-1] - t[:-2])[:, None]
     b = (t[2:] - t[1:-1])[:, None]
-    fwd = _log_difference_np(q[2:], q[1:-1])
-    bwd = _log_difference_np(q[:-2], q[1:-1])
+    # Every difference in one call (one dispatch instead of six, a few ms of `identify`'s start):
+    # the interior's forward and backward ones, then each end's two.
+    ends = ((0, (1, 2)), (n - 1, (n - 2, n - 3)))
+    later = np.concatenate([q[2:], q[:-2], q[[1, 2, n - 2, n - 3]]])
+    earlier = np.concatenate([q[1:-1], q[1:-1], q[[0, 0, n - 1, n - 1]]])
+    logs = _log_difference_np(later, earlier)
+    fwd, bwd, at_ends = logs[: n - 2], logs[n - 2 : 2 * (n - 2)], logs[2 * (n - 2) :]
     omega[1:-1] = (a**2 * fwd - b**2 * bwd) / (a * b * (a + b))
     # ends: points at 0, h1, h2 (h1, h2 of either sign)
-    for k, (k1, k2) in ((0, (1, 2)), (n - 1, (n - 2, n - 3))):
+    for e, (k, (k1, k2)) in enumerate(ends):
         h1, h2 = t[k1] - t[k], t[k2] - t[k]
-        p1 = _log_difference_np(q[k1], q[k])
-        p2 = _log_difference_np(q[k2], q[k])
+        p1, p2 = at_ends[2 * e], at_ends[2 * e + 1]
         omega[k] = (p1 * h2**2 - p2 * h1**2) / (h1 * h2 * (h2 - h1))
     return omega
 

@@ -103,7 +103,16 @@ ARMIJO_FACTOR = 0.5  # and halve it otherwise
 def _least_squares_step(jac, r, minimum_norm):
     """The Gauss–Newton step ``d`` minimising ``|J d + r|``: ``J = Q R``, then the SVD of ``R`` (the
     minimum-norm ``d``) or a triangular solve."""
-    q, upper = jnp.linalg.qr(jac)
+    m, n = jac.shape
+    if m > n:
+        # ``Qᵀ r`` without ``Q``: the triangular factor of ``[J | r]`` holds ``R`` and, in its last
+        # column, ``Qᵀ r`` (the same reflections applied to ``r``). Forming the 3 267 × 27 ``Q`` of
+        # identify's satellite took 0.83 ms of the step's 2.8 (XLA:CPU profile, per iteration).
+        both = jnp.linalg.qr(jnp.concatenate([jac, r[:, None]], axis=1), mode="r")
+        upper, q_r = both[:n, :n], both[:n, n]
+    else:
+        q, upper = jnp.linalg.qr(jac)
+        q_r = q.T @ r
     if minimum_norm:
         # The SVD of the small triangular factor (J = Q R, R = U S Vᵀ: J's singular values and right
         # vectors; Chan, ACM TOMS 8, 1982): 2.2 ms instead of 7.0 ms for the whole step on a 3 267 × 27
@@ -113,8 +122,8 @@ def _least_squares_step(jac, r, minimum_norm):
         # lineax's and numpy's cut-off: singular values below eps · max(m, n) · s_max count as zero.
         cutoff = jnp.finfo(jac.dtype).eps * max(jac.shape) * s[0]
         s_inv = jnp.where(s > cutoff, 1 / jnp.where(s > cutoff, s, 1), 0)
-        return -(vt.T @ (s_inv * (u.T @ (q.T @ r))))
-    return -jax.scipy.linalg.solve_triangular(upper, q.T @ r)
+        return -(vt.T @ (s_inv * (u.T @ q_r)))
+    return -jax.scipy.linalg.solve_triangular(upper, q_r)
 
 
 def _converged(f, predicted, ftol, floor):
