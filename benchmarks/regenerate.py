@@ -128,6 +128,11 @@ JOBS = {
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
         3,
     ),
+    "rotor_choice": Job(
+        ("rotor_choice_cpu.json",),
+        ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
+        1.5,
+    ),
 }
 
 

@@ -17,10 +17,12 @@
     python benchmarks/rotor.py                 # a few minutes on 2 cores
     python benchmarks/rotor.py --n 1000 --no-drift
     python benchmarks/rotor.py --against 95050c5 --no-drift
+    python benchmarks/rotor.py --choice-only --rounds 61 --json docs/rotor_choice_cpu.json  # 2. alone
 """
 
 import argparse
 import importlib.util
+import json
 import os
 import platform
 import statistics
@@ -40,7 +42,7 @@ import numpy as np
 import jaxrot
 from jaxrot import analytic, quaternion as quat
 from jaxrot._free_body._rotor import free_rotor
-from jaxrot.comparison import time_compiled
+from jaxrot.comparison import machine_info, time_compiled
 
 
 DTYPES = {"float64": jnp.float64, "float32": jnp.float32}
@@ -209,6 +211,7 @@ def choice_cost_table(n, rounds):
         "| dtype | program | fixed 2 [ns] | per body [ns] | per body / fixed 2, per round: median (IQR) |",
         "|---|---|---|---|---|",
     ]
+    rows = []
     for name, dtype in DTYPES.items():
         q, w = random_states(n, dtype)
         moments = jnp.asarray(MOMENTS, dtype)
@@ -247,7 +250,16 @@ def choice_cost_table(n, rounds):
             lines.append(
                 f"| {name} | {program} | {fixed:.1f} | {chosen:.1f} | {q2:.3f} ({q1:.3f}-{q3:.3f}) |"
             )
-    return "\n".join(lines)
+            rows.append(
+                {
+                    "dtype": name,
+                    "program": program,
+                    "fixed_2_ns": fixed,
+                    "per_body_ns": chosen,
+                    "ratio_quartiles": [float(q1), float(q2), float(q3)],
+                }
+            )
+    return "\n".join(lines), rows
 
 
 def rotor_at(rev):
@@ -314,15 +326,25 @@ def main(argv=None):
     parser.add_argument(
         "--against", metavar="REV", help="also time the rotor of git revision REV beside this one"
     )
+    parser.add_argument("--choice-only", action="store_true", help="only the choice-cost table (2.)")
+    parser.add_argument("--json", default=None, help="write the choice-cost table's rows here")
     ns = parser.parse_args(argv)
     print(header())
-    print(f"\nCost per particle-step, N = {ns.n}, I = {MOMENTS}, |ω| t = 0.3, median of {ns.repeats}")
-    print(cost_table(ns.n, ns.repeats))
+    if not ns.choice_only:
+        print(f"\nCost per particle-step, N = {ns.n}, I = {MOMENTS}, |ω| t = 0.3, median of {ns.repeats}")
+        print(cost_table(ns.n, ns.repeats))
     print(
         f"\nWhat the per-body step count costs at |ω| t = 0.3 (both take two steps), N = {ns.n}, "
         f"median of {ns.rounds} interleaved rounds"
     )
-    print(choice_cost_table(ns.n, ns.rounds))
+    text, rows = choice_cost_table(ns.n, ns.rounds)
+    print(text)
+    if ns.json:
+        info = machine_info()
+        with open(ns.json, "w") as f:
+            json.dump({"machine": info, "n": ns.n, "rounds": ns.rounds, "rows": rows}, f, indent=1)
+    if ns.choice_only:
+        return 0
     if ns.against:
         print(f"\nThis rotor against {ns.against}'s, N = {ns.n}, median of 9 interleaved rounds")
         print(against_table(ns.against, ns.n))

@@ -513,6 +513,24 @@ def identify_speed_table(docs):
     return _table(header, rows) + summary + _provenance("identify_speed_cpu.json", data["machine"])
 
 
+def rotor_choice_table(docs, name="rotor_choice_cpu.json"):
+    """The rotor's per-body step count against a fixed two at |ω|t = 0.3 (`benchmarks/rotor.py`, 2.)."""
+    data = _read(docs, name)
+    lines = [
+        "| dtype | program | fixed two [ns per body-step] | per body [ns] "
+        "| per body / fixed two: median (IQR) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in data["rows"]:
+        q1, q2, q3 = r["ratio_quartiles"]
+        lines.append(
+            f"| {r['dtype']} | {r['program']} | {r['fixed_2_ns']:.1f} | {r['per_body_ns']:.1f} "
+            f"| {q2:.3f} ({q1:.3f}–{q3:.3f}) |"
+        )
+    lines.append(f"\n*N = {data['n']}, ratios per round over {data['rounds']} interleaved rounds.*")
+    return "\n".join(lines) + _provenance(name, data["machine"])
+
+
 def throughput_peer_ratios(docs):
     """One sentence per dtype: each scheme's throughput over jax_md's NO_SQUISH at the largest N."""
     data = _read(docs, "throughput_cpu.json")
@@ -772,6 +790,7 @@ TABLES = {
     "stability_blow_up_table": stability_blow_up_table,
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
+    "rotor_choice_table": rotor_choice_table,
     "throughput_peer_ratios": throughput_peer_ratios,
     "throughput_jax_versions": throughput_jax_versions,
     "ynn_trap_table": ynn_trap_table,
