@@ -12,7 +12,9 @@ same start (a diagonal inertia, zero dipole, each start state from its first sam
   the same 27 parameters (six inertia elements, dipole, per manoeuvre a rotation-vector offset of
   q₀ and ω₀). The optimistix side gets no covariance: its time is the fit alone.
 
-Both sides are timed compiled (median of 7 runs) and with their first call (compile included);
+Both sides are timed with their first call (compile included) and compiled: the median of 7
+rounds in which every fit runs once (interleaved, so that a drift of the machine's speed moves
+all fits alike);
 "same fit quality" is checked as the largest difference of the inertia and dipole between the two
 fits in units of jaxrot's standard errors, and the final losses.
 
@@ -48,17 +50,23 @@ ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
 INERTIA0 = np.diag([0.04, 0.05, 0.06])
 
 
-def timed(fn, repeats=7):
-    """(first call s, median of ``repeats`` later calls s, last result)."""
+def first_call(fn):
+    """(seconds of the first call, compile included; its result)."""
     t0 = time.perf_counter()
     out = jax.block_until_ready(fn())
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return first, statistics.median(times), out
+    return time.perf_counter() - t0, out
+
+
+def interleaved_medians(fns, rounds=7):
+    """Median seconds of each compiled ``fn``, timed round-robin (one call of each per round): this
+    VM's speed drifts by up to 2× over minutes, so fits timed one after another are not comparable."""
+    times = [[] for _ in fns]
+    for _ in range(rounds):
+        for fn, samples in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn())
+            samples.append(time.perf_counter() - t0)
+    return [statistics.median(t) for t in times]
 
 
 def stack(experiments):
@@ -150,7 +158,7 @@ def main(argv=None):
             q0=np.asarray(q_start), omega0=np.asarray(omega_start),
         )  # fmt: skip
 
-    first, run, fit = timed(jaxrot_fit)
+    first, fit = first_call(jaxrot_fit)
     se = np.concatenate([np.asarray(fit.stderr.inertia)[ELEMENTS], np.asarray(fit.stderr.args["dipole"])])
     ours = np.concatenate([np.asarray(fit.inertia)[ELEMENTS], np.asarray(fit.args["dipole"])])
     truth = np.concatenate([SATELLITE_INERTIA[ELEMENTS], SATELLITE_DIPOLE])
@@ -184,12 +192,13 @@ def main(argv=None):
             save_every=substeps,
         )
         ours_error = max(ours_error, float(jnp.max(quat.angle_between(traj.q, clean_data["q"][k]))))
-    print(f"jaxrot identify: first call {first:.1f} s, compiled {run:.2f} s, loss {fit.loss:.1f}, "
+    print(f"jaxrot identify: first call {first:.1f} s, loss {fit.loss:.1f}, "
           f"{fit.n_iterations} iterations; model error at the truth {ours_error:.1e} rad")  # fmt: skip
     print(f"jaxrot estimate − truth, in standard errors: max {np.max(np.abs(ours - truth) / se):.2f}")
 
     label = f"jaxrot.identify ({fit.scheme}, {substeps} step(s) per sample, covariance included)"
-    rows = [(label, first, run, fit.loss, 0.0, ours_error)]
+    rows = [[label, first, None, fit.loss, 0.0, ours_error]]
+    fns = [jaxrot_fit]
     start = {
         "inertia": jnp.asarray(INERTIA0[ELEMENTS]),
         "dipole": jnp.zeros(3),
@@ -223,13 +232,17 @@ def main(argv=None):
                 return sol.value, sol.stats["num_steps"]
 
             solve = jax.jit(solve)
-            first_d, run_d, (value, n_opt) = timed(lambda solve=solve: solve(start))
+            first_d, (value, n_opt) = first_call(lambda solve=solve: solve(start))
+            fns.append(lambda solve=solve: solve(start))
             r_q, r_w = residuals(value, (model, data, q_start, sigma_q, sigma_omega))
             loss = float(jnp.sum(r_q**2) + jnp.sum(r_w**2))
             theirs = np.concatenate([np.asarray(value["inertia"]), np.asarray(value["dipole"])])
             gap = float(np.max(np.abs(theirs - ours) / se))
             label = f"diffrax {solver_name} dt = {step:g} s + optimistix {opt_name} ({int(n_opt)} steps)"
-            rows.append((label, first_d, run_d, loss, gap, error))
+            rows.append([label, first_d, None, loss, gap, error])
+    for row, median in zip(rows, interleaved_medians(fns), strict=True):
+        row[2] = median
+    run = rows[0][2]
     print()
     print(
         "| fit | first call [s] | compiled [s] | loss | max Δ vs jaxrot [se] | model error [rad] | × jaxrot |"
