@@ -24,7 +24,10 @@ class NoSquishCarry(NamedTuple):
         moments: principal moments ``(3,)``.
         principal_to_body: quaternion of the principal axes in the body frame
             ``(4,)``, or None when the inertia is already diagonal.
-        state: `RotState` in the user's body frame.
+
+    ``state``, the `RotState` in the user's body frame, is computed from these when
+    asked for, not carried: a time loop then carries 11 numbers per body (diagonal
+    inertia, the moments never rewritten) instead of 18.
     """
 
     q_principal: jax.Array
@@ -32,7 +35,10 @@ class NoSquishCarry(NamedTuple):
     torque: jax.Array
     moments: jax.Array
     principal_to_body: jax.Array | None
-    state: RotState
+
+    @property
+    def state(self) -> RotState:
+        return NoSquish._state(self.q_principal, self.momentum, self.moments, self.principal_to_body)
 
 
 def _permute(k, x):
@@ -131,7 +137,7 @@ class NoSquish(AbstractScheme):
         q_p = q if principal_to_body is None else quat.multiply(q, principal_to_body)
         l_p = moments * quat.rotate(quat.conjugate(q_p), omega)
         momentum = 2 * quat.multiply(q_p, quat.pure(l_p))
-        return NoSquishCarry(q_p, momentum, torque_world, moments, principal_to_body, state)
+        return NoSquishCarry(q_p, momentum, torque_world, moments, principal_to_body)
 
     @staticmethod
     def _kick(q_p, p, torque_world, moments, duration):
@@ -165,7 +171,7 @@ class NoSquish(AbstractScheme):
             end = self._state(q, p, moments, r)
             torque_world = stage(world_torque(torque, t + dt, end.q, end.omega, args))
         p = self._kick(q, p, torque_world, moments, half)
-        return NoSquishCarry(q, p, torque_world, moments, r, self._state(q, p, moments, r))
+        return NoSquishCarry(q, p, torque_world, moments, r)
 
     def state(self, carry):
         return carry.state
