@@ -3,10 +3,11 @@
 For each program of `benchmarks/throughput.py` (a `jaxrot.rollout` of N heavy tops, or jax_md's
 NVE), writes the optimised HLO of the compiled program to ``--out`` and prints the kernels in its
 loop body (fusions and other launches), the run time per particle-step, and what the card would
-move per particle-step at ``--bandwidth`` in that time. Four floors are timed beside them in the same
+move per particle-step at ``--bandwidth`` in that time. Five floors are timed beside them in the same
 process: ``copy``, a step that only rescales the state (one read and one write of q and ω),
 ``elementwise_exp``, one quaternion exponential per step (a full rotation's arithmetic), and
-``soa_exp``, the same step on q and ω split into their components (structure of arrays), and
+``soa_exp``, the same step on q and ω split into their components (structure of arrays),
+``tuple_exp``, the same with the (N, 4) carry split into components and stacked again in every step, and
 ``cm_exp``, the same step with the particle axis last (carry ``(4, N)``, the per-body code vmapped
 over the last axis). The ``cm_<scheme>`` programs run each scheme so (`component_major_run`), with the
 largest difference of their final orientations from the original's in the row.
@@ -113,6 +114,9 @@ def floor_run(kind, n_steps):
             return q * 1.0000001, w * 0.9999999
         if kind == "soa_exp":
             return _soa_step(q, w), w
+        if kind == "tuple_exp":  # (N, 4) carry, split into components and stacked again every step
+            split = (tuple(q[:, i] for i in range(4)), tuple(w[:, i] for i in range(3)))
+            return jnp.stack(_soa_step(*split), axis=-1), w
         one = lambda q, w: quat.multiply(q, quat.exp(0.5e-3 * quat.rotate(quat.conjugate(q), w)))  # noqa: E731
         if kind == "cm_exp":
             return jax.vmap(one, in_axes=-1, out_axes=-1)(q, w), w
@@ -184,7 +188,10 @@ def main():
     out = Path(ns.out)
     out.mkdir(parents=True, exist_ok=True)
     state, scene = bodies(ns.n, jnp.float32)
-    runs = {f"floor_{k}": floor_run(k, ns.steps) for k in ("copy", "elementwise_exp", "soa_exp", "cm_exp")}
+    runs = {
+        f"floor_{k}": floor_run(k, ns.steps)
+        for k in ("copy", "elementwise_exp", "soa_exp", "tuple_exp", "cm_exp")
+    }
     # cm_…: the same step with the particle axis last (component_major_run), checked against the original
     runs |= {s: jaxrot_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
     runs |= {f"cm_{s}": component_major_run(s, scene, ns.steps) for s in ns.schemes.split(",")}
@@ -206,9 +213,8 @@ def main():
             "bytes_at_bandwidth": ns_per * 1e-9 * ns.bandwidth,
         }
         row |= kernels(hlo)
-        twin = {"floor_cm_exp": "floor_elementwise_exp"}.get(
-            name, name[3:] if name.startswith("cm_") else None
-        )
+        plain = name[3:] if name.startswith("cm_") else None
+        twin = "floor_elementwise_exp" if name in ("floor_cm_exp", "floor_tuple_exp") else plain
         if twin in finals:
             row["max_abs_diff_vs_" + twin] = float(jnp.max(jnp.abs(final - finals[twin])))
         rows.append(row)
