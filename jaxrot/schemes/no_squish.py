@@ -24,10 +24,7 @@ class NoSquishCarry(NamedTuple):
         moments: principal moments ``(3,)``.
         principal_to_body: quaternion of the principal axes in the body frame
             ``(4,)``, or None when the inertia is already diagonal.
-
-    ``state``, the `RotState` in the user's body frame, is computed from these when
-    asked for, not carried: a time loop then carries 11 numbers per body (diagonal
-    inertia, the moments never rewritten) instead of 18.
+        state: `RotState` in the user's body frame.
     """
 
     q_principal: jax.Array
@@ -35,10 +32,7 @@ class NoSquishCarry(NamedTuple):
     torque: jax.Array
     moments: jax.Array
     principal_to_body: jax.Array | None
-
-    @property
-    def state(self) -> RotState:
-        return NoSquish._state(self.q_principal, self.momentum, self.moments, self.principal_to_body)
+    state: RotState
 
 
 def _permute(k, x):
@@ -137,7 +131,7 @@ class NoSquish(AbstractScheme):
         q_p = q if principal_to_body is None else quat.multiply(q, principal_to_body)
         l_p = moments * quat.rotate(quat.conjugate(q_p), omega)
         momentum = 2 * quat.multiply(q_p, quat.pure(l_p))
-        return NoSquishCarry(q_p, momentum, torque_world, moments, principal_to_body)
+        return NoSquishCarry(q_p, momentum, torque_world, moments, principal_to_body, state)
 
     @staticmethod
     def _kick(q_p, p, torque_world, moments, duration):
@@ -171,7 +165,7 @@ class NoSquish(AbstractScheme):
             end = self._state(q, p, moments, r)
             torque_world = stage(world_torque(torque, t + dt, end.q, end.omega, args))
         p = self._kick(q, p, torque_world, moments, half)
-        return NoSquishCarry(q, p, torque_world, moments, r)
+        return NoSquishCarry(q, p, torque_world, moments, r, self._state(q, p, moments, r))
 
     def state(self, carry):
         return carry.state
