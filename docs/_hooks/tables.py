@@ -293,38 +293,46 @@ def gpu_throughput_ratio_table(docs, name, base):
 def gpu_passes_table(docs, name="gpu_h100/passes.json"):
     """Kernels in one step's loop body and time per particle-step (`benchmarks/gpu_passes.py`)."""
     data = _read(docs, name)
-    lines = [
-        "| program | fusions | copies, transposes | ns per particle-step "
-        "| bytes per particle-step at the card's bandwidth |",
-        "|---|---|---|---|---|",
+    header = [
+        "program",
+        "fusions",
+        "copies, transposes",
+        "ns per particle-step",
+        "bytes per particle-step at the card's bandwidth",
     ]
-    for r in data["rows"]:
-        lines.append(
-            f"| {r['program']} | {r['fusion']} | {r['copy/transpose']} | {r['ns_per_particle_step']:.3f} "
-            f"| {r['bytes_at_bandwidth']:.0f} |"
-        )
+    rows = [
+        [
+            r["program"],
+            r["fusion"],
+            r["copy/transpose"],
+            f"{r['ns_per_particle_step']:.3f}",
+            f"{r['bytes_at_bandwidth']:.0f}",
+        ]
+        for r in data["rows"]
+    ]
     m = data["machine"]
-    lines.append(f"\n*From `docs/{name}`: N = {data['n']:.0e}, float32, {m['device']}, jax {m['jax']}.*")
-    return "\n".join(lines)
+    footer = f"\n\n*From `docs/{name}`: N = {data['n']:.0e}, float32, {m['device']}, jax {m['jax']}.*"
+    return _table(header, rows) + footer
 
 
 def cpu_vector_width_table(docs, name="cpu_vector_width.json"):
     """Throughput with 512-bit vectors over XLA:CPU's 256, per scheme (`benchmarks/cpu_options.py`)."""
     data = _read(docs, name)
     schemes = list(dict.fromkeys(r["scheme"] for r in data["rows"]))
-    lines = ["| dtype | N | " + " | ".join(schemes) + " |", "|" + "---|" * (len(schemes) + 2)]
+    rows = []
     for dtype, n in dict.fromkeys((r["dtype"], r["n"]) for r in data["rows"]):
         by = {r["scheme"]: r for r in data["rows"] if (r["dtype"], r["n"]) == (dtype, n)}
-        cells = [f"{by[s]['rate_512'] / by[s]['rate_256']:.2f}" for s in schemes]
-        lines.append(f"| {dtype} | {_power_of_ten(n)} | " + " | ".join(cells) + " |")
+        rows.append(
+            [dtype, _power_of_ten(n), *(f"{by[s]['rate_512'] / by[s]['rate_256']:.2f}" for s in schemes)]
+        )
     m = data["machine"]
     n_same = sum(r["same_bits"] for r in data["rows"])
     same = f"final states the same bits in {n_same} of {len(data['rows'])} cells"
-    lines.append(
-        f"\n*From `docs/{name}`: {m['cpu_model']} ({m['cpus']} cores, AVX-512 {m['avx512f']}), "
+    footer = (
+        f"\n\n*From `docs/{name}`: {m['cpu_model']} ({m['cpus']} cores, AVX-512 {m['avx512f']}), "
         f"Python {m['python']}, jax {m['jax']}; {same}.*"
     )
-    return "\n".join(lines)
+    return _table(["dtype", "N", *schemes], rows) + footer
 
 
 def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
@@ -516,19 +524,20 @@ def identify_speed_table(docs):
 def rotor_choice_table(docs, name="rotor_choice_cpu.json"):
     """The rotor's per-body step count against a fixed two at |ω|t = 0.3 (`benchmarks/rotor.py`, 2.)."""
     data = _read(docs, name)
-    lines = [
-        "| dtype | program | fixed two [ns per body-step] | per body [ns] "
-        "| per body / fixed two: median (IQR) |",
-        "|---|---|---|---|---|",
+    header = [
+        "dtype",
+        "program",
+        "fixed two [ns per body-step]",
+        "per body [ns]",
+        "per body / fixed two: median (IQR)",
     ]
+    rows = []
     for r in data["rows"]:
         q1, q2, q3 = r["ratio_quartiles"]
-        lines.append(
-            f"| {r['dtype']} | {r['program']} | {r['fixed_2_ns']:.1f} | {r['per_body_ns']:.1f} "
-            f"| {q2:.3f} ({q1:.3f}–{q3:.3f}) |"
-        )
-    lines.append(f"\n*N = {data['n']}, ratios per round over {data['rounds']} interleaved rounds.*")
-    return "\n".join(lines) + _provenance(name, data["machine"])
+        ratio = f"{q2:.3f} ({q1:.3f}–{q3:.3f})"
+        rows.append([r["dtype"], r["program"], f"{r['fixed_2_ns']:.1f}", f"{r['per_body_ns']:.1f}", ratio])
+    rounds = f"\n\n*N = {data['n']}, ratios per round over {data['rounds']} interleaved rounds.*"
+    return _table(header, rows) + rounds + _provenance(name, data["machine"])
 
 
 def throughput_peer_ratios(docs):
