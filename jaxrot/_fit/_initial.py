@@ -54,8 +54,9 @@ def estimate_omega(t, q):
     # Every difference in one call (one dispatch instead of six, a few ms of `identify`'s start):
     # the interior's forward and backward ones, then each end's two.
     ends = ((0, (1, 2)), (n - 1, (n - 2, n - 3)))
-    later = np.concatenate([q[2:], q[:-2], q[[1, 2, n - 2, n - 3]]])
-    earlier = np.concatenate([q[1:-1], q[1:-1], q[[0, 0, n - 1, n - 1]]])
+    end_pairs = [(k_other, k) for k, others in ends for k_other in others]  # (later, earlier) rows
+    later = np.concatenate([q[2:], q[:-2], q[[a for a, _ in end_pairs]]])
+    earlier = np.concatenate([q[1:-1], q[1:-1], q[[b for _, b in end_pairs]]])
     logs = _log_difference_np(later, earlier)
     fwd, bwd, at_ends = logs[: n - 2], logs[n - 2 : 2 * (n - 2)], logs[2 * (n - 2) :]
     omega[1:-1] = (a**2 * fwd - b**2 * bwd) / (a * b * (a + b))
