@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from _telemetry import SATELLITE_DIPOLE, SATELLITE_INERTIA, dipole_torque, satellite_experiments  # noqa: E402
 
 import jaxrot  # noqa: E402
-import jaxrot._fit._identify as identify_module  # noqa: E402
+import jaxrot._fit._identify_start as identify_start  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
 
 
@@ -40,7 +40,7 @@ ANGLES = {  # label: (scheme, step angles in rad)
 }
 for label, (scheme, angles) in ANGLES.items():
     for angle in angles:
-        identify_module.DEFAULT_STEP_ANGLE = angle
+        identify_start.DEFAULT_STEP_ANGLE = angle
         try:
             t0 = time.perf_counter()
             fit = jaxrot.identify(

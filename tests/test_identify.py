@@ -267,25 +267,17 @@ def test_jacobian_is_finite_at_a_sphere_at_rest():
     assert np.all(np.isfinite(fit.loss_history))
 
 
-def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
-    """`identify` pushes through each experiment only the tangents it depends on (the shared
-    parameters and its own start); the zero blocks are filled in. The result must be
-    ``jax.jacfwd`` of the whole residual vector: the same operations on each tangent, batched
-    differently, so entries agree to reassociation only: ~10³ operations per entry (20 steps of a
-    few dozen) at float64's 1.1e-16, inside 1e-11 of the largest entry."""
-    from jaxrot._fit import _identify
-    from jaxrot._fit._identify_model import residuals, residuals_and_jacobian, states
-
-    seen = {}
-
-    class Captured(Exception):
-        pass
-
-    def capture(residual_fn, z0, model, *args, **kwargs):  # the fit's start, without compiling the fit
-        seen["phi"], seen["model"] = z0, model
-        raise Captured
-
-    monkeypatch.setattr(_identify, "gauss_newton", capture)
+def test_per_experiment_jacobian_is_the_full_forward_jacobian():
+    """`identify` pushes through each experiment only the tangents it depends on (the shared head
+    and its own block); the zero blocks are filled in. The result must be ``jax.jacfwd`` of the
+    whole residual vector: the same operations on each tangent, batched differently, so entries
+    agree to reassociation only: ~10³ operations per entry (20 steps of a few dozen) at float64's
+    1.1e-16, inside 1e-11 of the largest entry. The model is built by identify's own stages
+    (check → start → problem), without compiling the fit."""
+    from jaxrot._fit._identify_check import check_arguments
+    from jaxrot._fit._identify_model import n_head, n_own, residuals, residuals_and_jacobian, states
+    from jaxrot._fit._identify_problem import build_problem
+    from jaxrot._fit._identify_start import starting_point
 
     def torque(t, q, omega, args):
         return args["gain"] * jnp.array([0.0, 0.01, 0.02]) - 0.05 * omega
@@ -301,15 +293,18 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
         experiments.append(
             jaxrot.Experiment(record.t, q=record.q, omega_body=omega_body, sigma_q=1e-3, sigma_omega=1e-3)
         )
-    with pytest.raises(Captured):
-        jaxrot.identify(
-            experiments, torque=torque, args={"gain": jnp.array(0.8)}, free_args={"gain": True},
-            scheme="zhao", dt=0.05,
-        )  # fmt: skip
-    phi, model = seen["phi"], seen["model"]
+    settings = check_arguments(
+        experiments, torque=torque, args={"gain": jnp.array(0.8)}, free_args={"gain": True}, inertia0=None,
+        free_inertia=True, scheme="zhao", dt=0.05, q0=None, omega0=None, max_iter=10, ftol=1e-10,
+        rcond=None, sensors=None,
+    )  # fmt: skip
+    problem = build_problem(settings, starting_point(settings))
+    phi, model = jnp.asarray(problem.phi0), problem.model
     r, jac, (q, omega) = jax.jit(residuals_and_jacobian)(phi, model)
     full = jax.jit(jax.jacfwd(residuals))(phi, model)
-    assert jac.shape == full.shape == (r.size, 6 + 1 + 2 * 6)
+    head, own = n_head(model.layout), n_own(model.layout)
+    assert (head, own) == (6 + 1, 6)
+    assert jac.shape == full.shape == (r.size, head + 2 * own)
     # The values ride along as jacfwd's primal, compiled in another program: each of the 20 steps
     # rounds the state by a few eps (~1e-15 rad), whitened by σ = 1e-3: 1e-11 is 10× that margin.
     np.testing.assert_allclose(r, jax.jit(residuals)(phi, model), rtol=0, atol=1e-11)
@@ -320,27 +315,40 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(monkeypatch):
     np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-13)
     np.testing.assert_allclose(omega, omega_ref, rtol=0, atol=1e-13)
     # The blocks the rollouts did not compute are the zeros they must be: experiment 0's rows do
-    # not move with experiment 1's start.
+    # not move with experiment 1's block.
     rows = r.size // 2
-    assert float(jnp.max(jnp.abs(full[:rows, 7 + 3 : 7 + 6]))) == 0.0
+    assert float(jnp.max(jnp.abs(full[:rows, head + own :]))) == 0.0
 
 
-@pytest.mark.parametrize("m", [1, 2, 13, 64, 65])
-def test_control_interpolation_is_numpys_interp(m):
-    """The known torque between its samples: linear, held outside, as `np.interp`, for records short
-    enough for the sum of ramps (m ≤ 64) and past it (jnp.interp). The ramp sum adds up to m − 1
-    terms of size ≤ 2 max|τ| (each rounded, plus the ramp's own rounding): inside 4 m eps max|τ|."""
-    from jaxrot._fit._identify_model import RAMP_SUM_MAX_SAMPLES, interpolate_control
+@pytest.mark.parametrize("hold", ["linear", "previous"])
+def test_control_in_each_step_is_the_sampled_control(hold):
+    """Inside each model step the control is ``value + slope (t − start)``: `np.interp` of the samples
+    (``"linear"``), or the sample at or before ``t``, zero before the first (``"previous"``). Steps
+    land on every control time inside the record, so no step straddles a jump or a kink. Each value
+    is one interpolation plus one product: within 8 eps of the largest sample."""
+    from jaxrot._fit._controls import step_grid
 
-    assert RAMP_SUM_MAX_SAMPLES == 64  # the parametrisation straddles it
-    rng = np.random.default_rng(m)
-    t_c = np.cumsum(rng.uniform(0.1, 2.0, m))
-    tau_c = rng.normal(size=(m, 3))
-    t = np.concatenate([np.linspace(t_c[0] - 3.0, t_c[-1] + 3.0, 301), t_c])
-    got = jax.jit(jax.vmap(interpolate_control, in_axes=(0, None, None)))(t, t_c, tau_c)
-    expected = np.stack([np.interp(t, t_c, tau_c[:, i]) for i in range(3)], axis=-1)
-    eps = np.finfo(np.float64).eps
-    np.testing.assert_allclose(got, expected, rtol=0, atol=4 * m * eps * np.abs(tau_c).max())
+    rng = np.random.default_rng(5)
+    t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 10.0, 30)), [10.0]])
+    t_c = np.sort(rng.uniform(-1.0, 11.0, 17))
+    tau_c = rng.normal(size=(17, 3))
+    grid = step_grid(t, (t_c, tau_c), hold, max_step=0.3)
+    ends = grid.start + grid.length
+    np.testing.assert_allclose(ends[:-1], grid.start[1:], rtol=0, atol=1e-13)
+    assert grid.length.max() <= 0.3 and abs(ends[-1] - 10.0) < 1e-13
+    nodes = np.concatenate([grid.start, ends[-1:]])
+    inside = t_c[(t_c > 0) & (t_c < 10)]
+    assert np.all(np.min(np.abs(inside[:, None] - nodes[None, :]), axis=1) < 1e-12)  # steps land on them
+    np.testing.assert_allclose(nodes[grid.sample_node], t, rtol=0, atol=1e-13)
+    fraction = rng.uniform(0.0, 1.0, grid.start.size)
+    times = grid.start + fraction * grid.length
+    got = grid.value + grid.slope * (times - grid.start)[:, None]
+    if hold == "linear":
+        expected = np.stack([np.interp(times, t_c, tau_c[:, i]) for i in range(3)], axis=-1)
+    else:
+        index = np.searchsorted(t_c, times, side="right") - 1
+        expected = np.where(index[:, None] >= 0, tau_c[np.maximum(index, 0)], 0.0)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=8 * np.finfo(float).eps * np.abs(tau_c).max())
 
 
 @pytest.mark.slow

@@ -42,6 +42,7 @@ def reference_rollout(
     atol=1e-12,
     max_steps: int = 1_000_000,
     normalize: bool = False,
+    jump_ts=None,
 ) -> Trajectory:
     """High-accuracy reference trajectory from diffrax (Dopri8, adaptive PID steps).
 
@@ -60,6 +61,11 @@ def reference_rollout(
         rtol, atol: tolerances of the PID step-size controller.
         max_steps: cap on solver steps per particle.
         normalize: normalise ``state.q`` instead of rejecting a non-unit one.
+        jump_ts: times ``(m,)`` at which the torque jumps (a held control, a switched
+            field), or None. The solver steps onto each and restarts there
+            (`diffrax.ClipStepSizeController`): an embedded error estimate does not see
+            a jump inside a step, so without them the solution is only as accurate as
+            the step that straddles it.
 
     Returns:
         `Trajectory` with ``t = ts``, ``q`` ``(n, ..., 4)``, ``omega`` ``(n, ..., 3)``.
@@ -92,11 +98,14 @@ def reference_rollout(
                 f'jax.config.update("jax_enable_x64", True) and pass float64 arrays, or use {name} >= 1e-6.'
             )
 
+    if jump_ts is not None:
+        jump_ts = check_times(jump_ts, dtype, ordered=True, name="jump_ts")
+
     flat, inertia = flatten_particles(state, inertia, per_particle)
     args, args_axes = split_per_body(args, batch_shape)
     traj, result, _ = adaptive_solve(
         diffrax.Dopri8(), flat.q, flat.omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps,
-        args_axes,
+        args_axes, jump_ts,
     )  # fmt: skip
     failed = result != diffrax.RESULTS.successful
     count = int(np.sum(failed)) if is_concrete(failed) else "some"
@@ -125,8 +134,9 @@ def reference_rollout(
 
 @eqx.filter_jit
 def adaptive_solve(
-    solver, q, omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps, args_axes=None
-):
+    solver, q, omega, inertia, per_particle, ts, torque, args, rtol, atol, max_steps, args_axes=None,
+    jump_ts=None,
+):  # fmt: skip
     """Adaptive diffrax solve of ``(N, ...)`` flattened particles (no input checks).
 
     Each particle gets its own adaptive steps, except under a coupled torque
@@ -134,7 +144,11 @@ def adaptive_solve(
     with shared steps. Returns ``(trajectory, result, n_steps)``: the diffrax
     result code and the number of attempted steps (accepted + rejected) per
     particle. Shared by `reference_rollout` and ``python -m jaxrot compare``.
+    ``jump_ts``: times the steps land on (torque discontinuities), or None.
     """
+    controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    if jump_ts is not None:
+        controller = diffrax.ClipStepSizeController(controller, jump_ts=jump_ts)
     inertia_axis = 0 if per_particle else None
     prepare = jax.vmap(body_inertia) if per_particle else body_inertia
     coupled = getattr(torque, "coupled", False)
@@ -150,7 +164,7 @@ def adaptive_solve(
             y0=(q0, omega_b0),
             args=(inert, torque, a),
             saveat=diffrax.SaveAt(ts=ts),
-            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+            stepsize_controller=controller,
             max_steps=max_steps,
             throw=False,
         )

@@ -1,5 +1,15 @@
-"""`fit_inertia`: the body-frame inertia tensor from observed orientations, by gradients through a scheme.
+"""Fitting rigid bodies to data: `fit_inertia` (one body, full orientations) and `identify` (telemetry).
 
+Two stacks share the parameterisation, the linear start and the optimiser.
+
+`identify` (several experiments, any sensors, torque and sensor parameters, uncertainty):
+`_experiment` (`Experiment`, one manoeuvre's data), `_controls` (the step grid of sampled
+controls), `_sensors` (the sensor parameters and their models), then one module per stage:
+`_identify_check` → `_identify_start` → `_identify_problem` (on the model `_identify_model`)
+→ `_identify_solve` → `_identify_uncertainty` (on `_uncertainty`) → `_identification`
+(the result) and `_report` (its summary and residual figure); `_identify` runs them.
+
+`fit_inertia`:
 The model is a rigid body stepped by a jaxrot scheme (Zhao–van Wachem by
 default) from a fitted initial state; the objective is the mean squared
 geodesic angle between modelled and observed orientations (plus, when given,
@@ -21,11 +31,8 @@ One concept per module: `_parameterisation` (the physical tensor parameters),
 
 from ._experiment import Experiment as Experiment
 from ._fit_inertia import FitResult as FitResult, fit_inertia as fit_inertia
-from ._identify import (
-    Identification as Identification,
-    StandardErrors as StandardErrors,
-    identify as identify,
-)
+from ._identification import Identification as Identification, StandardErrors as StandardErrors
+from ._identify import identify as identify
 from ._initial import estimate_omega as estimate_omega
 from ._objective import (
     _objective as _objective,

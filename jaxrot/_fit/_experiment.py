@@ -1,5 +1,6 @@
 """`Experiment`: one manoeuvre's telemetry, checked when it is made."""
 
+import jax
 import numpy as np
 
 from .._validation import QUATERNION_NORM_TOL, is_concrete
@@ -7,6 +8,9 @@ from .._validation import QUATERNION_NORM_TOL, is_concrete
 
 # The observation kinds: (attribute, its noise attribute, residual components, informative ones).
 KINDS = (("q", "sigma_q", 3, 3), ("omega_body", "sigma_omega", 3, 3), ("direction", "sigma_direction", 3, 2))
+# How a sampled control torque acts: the frame of its samples, and how it runs between them.
+CONTROL_FRAMES = ("world", "body")
+CONTROL_HOLDS = ("linear", "previous")
 
 
 def _array(x, name, shape_text, width):
@@ -48,6 +52,27 @@ def _times(t, name):
         )
 
 
+def _known_args(args):
+    """``args`` as a dict of concrete float arrays (checked against identify's ``args`` there)."""
+    if args is None:
+        return {}
+    if not isinstance(args, dict) or not all(isinstance(key, str) for key in args):
+        raise ValueError(
+            "`args` must be a dict naming some keys of identify's `args` with this experiment's known "
+            f"values; got {type(args).__name__}."
+        )
+    known = {}
+    for key, value in args.items():
+        leaves = jax.tree_util.tree_leaves(value)
+        if not all(is_concrete(leaf) for leaf in leaves):
+            raise ValueError(f"`args[{key!r}]` must be concrete: identify runs eagerly (not under jit).")
+        value = jax.tree_util.tree_map(np.asarray, value)
+        if not all(np.all(np.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(value)):
+            raise ValueError(f"`args[{key!r}]` must be finite.")
+        known[key] = value
+    return known
+
+
 class Experiment:
     """One manoeuvre's data for `jaxrot.identify`: sample times, observations, noise, known torque.
 
@@ -67,14 +92,28 @@ class Experiment:
         sigma_q, sigma_omega, sigma_direction: noise standard deviation of each
             kind (rad per axis; rad/time per component; rad per perpendicular
             axis). None: estimated from the residuals of that kind.
-        control: ``(t_c, tau_c)``, a known **world-frame** torque sampled at
-            increasing ``t_c`` ``(m,)``, ``tau_c`` ``(m, 3)``, interpolated linearly
-            (held constant outside ``t_c``) and added to the torque model.
+        control: ``(t_c, tau_c)``, a known torque sampled at increasing ``t_c``
+            ``(m,)``, ``tau_c`` ``(m, 3)``, added to the torque model.
+        control_frame: ``"world"`` (default): ``tau_c`` is a world-frame torque;
+            ``"body"``: a body-frame one (a body-fixed actuator: reaction wheel,
+            magnetorquer, thruster), turned with the body.
+        control_hold: ``"linear"`` (default): interpolated linearly between the
+            samples and held at the end values outside ``t_c``; ``"previous"``: each
+            sample holds from its time until the next (a zero-order hold, as flight
+            software and MuJoCo apply commands), no torque before ``t_c[0]``. Either
+            way the model's steps land on the control times, so a held torque's
+            jumps fall between steps and every stage of a step sees the sample held
+            over that step.
+        args: this experiment's known values of some of `jaxrot.identify`'s ``args``:
+            a dict naming a subset of its keys (a payload moved, a thruster used in
+            this run only); the others take ``identify``'s values. Checked against
+            ``args`` when ``identify`` runs.
 
     Raises:
         ValueError: an array whose length disagrees with ``t``, unsorted or
             duplicate times, a σ ≤ 0, non-unit quaternions, ``direction`` without
-            ``body_vector``, or no observation at all.
+            ``body_vector``, no observation at all, an unknown ``control_frame`` or
+            ``control_hold``, or ``args`` that is not a dict of finite arrays.
 
     Example:
         >>> import numpy as np, jaxrot
@@ -96,6 +135,9 @@ class Experiment:
         sigma_omega=None,
         sigma_direction=None,
         control=None,
+        control_frame="world",
+        control_hold="linear",
+        args=None,
     ):
         t = _array(t, "t", "of sample times (n,)", None)
         _times(t, "t")
@@ -162,6 +204,16 @@ class Experiment:
                     f"control time; got shape {tau_c.shape}."
                 )
             control = (t_c, tau_c)
+        if control_frame not in CONTROL_FRAMES:
+            raise ValueError(
+                f"`control_frame` must be 'world' (world-frame torque samples) or 'body' (a body-fixed "
+                f"actuator's); got {control_frame!r}."
+            )
+        if control_hold not in CONTROL_HOLDS:
+            raise ValueError(
+                f"`control_hold` must be 'linear' (interpolated) or 'previous' (each sample held until the "
+                f"next, a zero-order hold); got {control_hold!r}."
+            )
         self.t = t
         self.q = arrays["q"]
         self.omega_body = arrays["omega_body"]
@@ -171,6 +223,9 @@ class Experiment:
         self.sigma_omega = _sigma(sigma_omega, "sigma_omega")
         self.sigma_direction = _sigma(sigma_direction, "sigma_direction")
         self.control = control
+        self.control_frame = control_frame
+        self.control_hold = control_hold
+        self.args = _known_args(args)
         self.counts = counts
 
     def __repr__(self):
@@ -181,5 +236,10 @@ class Experiment:
                 noise = "estimated" if sigma is None else f"{sigma:g}"
                 parts.append(f"{name}: {self.counts[name]} samples (sigma {noise})")
         if self.control is not None:
-            parts.append(f"control: {self.control[0].shape[0]} samples")
+            parts.append(
+                f"control: {self.control[0].shape[0]} samples ({self.control_frame} frame, "
+                f"{self.control_hold})"
+            )
+        if self.args:
+            parts.append(f"args: {sorted(self.args)}")
         return f"Experiment({', '.join(parts)})"

@@ -1,14 +1,19 @@
 """`identify`'s model: the parameter vector, the padded experiments, and the whitened residuals.
 
-The optimiser works on one vector ``φ = [inertia | free args | δq₀ per experiment |
-ω₀ per experiment]``. Every ``φ`` is physical: the tensor comes from
-`inertia_from_cholesky` (or, with the axes known, moments ``s₂+s₃, s₁+s₃, s₁+s₂``
-of squared second moments ``sᵢ = pᵢ²``), a positive argument is ``exp`` of its
-coordinate, and the initial orientation is ``exp(δq₀) ⊗ q_start``.
+The optimiser works on one vector ``φ = [head | own₀ | own₁ | …]``. The head holds what all
+experiments share: the inertia's coordinates, the shared free ``args`` leaves and the shared
+fitted sensor parameters (gyro scale and delay, tracker mounting and delay); experiment
+``j``'s own block holds ``δq₀`` (3), ``ω₀`` (3), its values of the ``"per_experiment"``
+leaves and its gyro bias when fitted. Every ``φ`` is physical: the tensor comes from
+`inertia_from_cholesky` (or, with the axes known, moments ``s₂+s₃, s₁+s₃, s₁+s₂`` of squared
+second moments ``sᵢ = pᵢ²``), a positive argument is ``exp`` of its coordinate, and the
+initial orientation is ``exp(δq₀) ⊗ q_start``.
 
-The experiments are padded to a common number of samples and control samples
-and run under one ``vmap``: padding repeats the last time (zero-length steps
-leave the state alone) and carries weight 0, as do NaN samples and absent kinds.
+Each experiment is stepped over its own `_controls.StepGrid` (steps on every sample and
+control time); the experiments are padded to common numbers of steps and samples and run
+under one ``vmap``: padded steps have length zero and padded samples weight 0, as do NaN
+samples and absent kinds. A delayed sensor sees the state at ``t − delay``: one more step
+from the node before that time.
 """
 
 import equinox as eqx
@@ -18,50 +23,27 @@ import numpy as np
 
 from .. import quaternion as quat
 from .._inertia import body_inertia
-from ._objective import sample_states, signed_vector
+from .._state import RotState
+from ._objective import signed_vector
 from ._parameterisation import inertia_from_cholesky
 
 
-class ControlledTorque(eqx.Module):
-    """The user's torque model plus the experiment's sampled control torque (world frame).
-
-    Called with ``args = (user_args, t_c (m,), tau_c (m, 3))``; ``tau_c`` is
-    interpolated linearly in time and held constant outside ``t_c``.
-    """
-
-    user: object = eqx.field(static=True)
-
-    def __call__(self, t, q, omega, args):
-        user_args, t_c, tau_c = args
-        control = interpolate_control(t, t_c, tau_c)
-        if self.user is None:
-            return control
-        return jnp.asarray(self.user(t, q, omega, user_args), control.dtype) + control
-
-
-# Up to this many control samples the interpolation is a sum of ramps (one fused kernel, O(M));
-# beyond, jnp.interp's binary search (a while loop of log₂ M passes, each a handful of kernels).
-RAMP_SUM_MAX_SAMPLES = 64
-
-
-def interpolate_control(t, t_c, tau_c):
-    """``tau_c (M, 3)`` sampled at strictly increasing ``t_c (M,)``, linear in between, held outside.
-
-    For short records, ``τ(t) = τ₀ + Σⱼ clip((t − tⱼ) / (tⱼ₊₁ − tⱼ), 0, 1) (τⱼ₊₁ − τⱼ)``: the same
-    values as `jnp.interp` without its search loop, which inside `identify`'s rollout ran once per
-    stage evaluation, 4 passes of 5 kernels each for 13 control samples (on XLA:CPU each kernel costs
-    a fixed launch overhead; the rollout is bound by their count, not by arithmetic).
-    """
-    if t_c.shape[0] > RAMP_SUM_MAX_SAMPLES:
-        return jax.vmap(lambda column: jnp.interp(t, t_c, column), in_axes=1)(tau_c)
-    ramps = jnp.clip((t - t_c[:-1]) / (t_c[1:] - t_c[:-1]), 0, 1)
-    return tau_c[0] + jnp.sum(ramps[:, None] * (tau_c[1:] - tau_c[:-1]), axis=0)
+# Step and sample indices: the default integer of the x64 setting, as `jnp.arange` makes them.
+INDEX = jax.dtypes.canonicalize_dtype(jnp.int64)
+SHARED_SENSORS = ("gyro_scale", "gyro_delay", "tracker_mount", "tracker_delay")  # in the head, this order
 
 
 class Data(eqx.Module):
-    """The experiments, padded to ``P + 1`` samples and ``M`` control samples: leading axis ``k``."""
+    """The experiments, padded to ``P + 1`` samples and ``N`` steps: leading axis ``k``."""
 
-    t: jax.Array  # (k, P + 1)
+    t: jax.Array  # (k, P + 1) sample times
+    sample_node: jax.Array  # (k, P + 1) int: the step grid's node at each sample
+    step_start: jax.Array  # (k, N)
+    step_length: jax.Array  # (k, N)
+    control_value: jax.Array | None  # (k, N, 3) the control at each step's start
+    control_slope: jax.Array | None  # (k, N, 3)
+    control_body: jax.Array | None  # (k,) bool: a body-frame control
+    control_edges: jax.Array | None  # (k, 2, 2, 3) before the first and after the last node: value, slope
     q: jax.Array  # (k, P + 1, 4)   NaN and absent samples replaced by the identity (weight 0)
     omega_body: jax.Array  # (k, P + 1, 3)
     direction: jax.Array  # (k, P + 1, 3)
@@ -69,8 +51,8 @@ class Data(eqx.Module):
     body_vector: jax.Array  # (k, 3)
     sigma: jax.Array  # (k, 3) noise standard deviation per kind (1 where absent)
     q_start: jax.Array  # (k, 4) the orientation δq₀ is measured from
-    control_t: jax.Array | None  # (k, M)
-    control_tau: jax.Array | None  # (k, M, 3)
+    known: tuple  # per leaf of Layout.known_leaves, its held values (k, ...)
+    held_bias: jax.Array | None  # (k, 3) a held gyro bias
 
 
 class Layout(eqx.Module):
@@ -79,13 +61,23 @@ class Layout(eqx.Module):
     inertia_mode: str = eqx.field(static=True)  # "tensor", "moments" or "fixed"
     unit_scale: bool = eqx.field(static=True)  # torque-free: the tensor's scale is fixed, not fitted
     n_inertia: int = eqx.field(static=True)
-    free_leaves: tuple = eqx.field(static=True)  # ((leaf index, positive), ...)
+    shared_leaves: tuple = eqx.field(static=True)  # ((leaf index, positive), ...) fitted, shared
+    own_leaves: tuple = eqx.field(static=True)  # (leaf index, ...) fitted per experiment
+    known_leaves: tuple = eqx.field(static=True)  # (leaf index, ...) held per experiment (Data.known)
+    sensors: tuple = eqx.field(static=True)  # ((name, fitted), ...) in `_sensors.SENSORS` order
     treedef: object = eqx.field(static=True)
     n_experiments: int = eqx.field(static=True)
     inertia0: jax.Array  # (3, 3) fixed tensor ("fixed"), or the known axes ("moments")
     lead: jax.Array  # the fixed first inertia coordinate when unit_scale (L₀₀ or p₀)
     trace0: jax.Array  # the trace a scale-free tensor is given
-    leaves: tuple  # args' leaves at the start (the fixed ones are used as they are)
+    leaves: tuple  # args' leaves at the start (the held ones are used as they are)
+    held_sensors: dict  # name: value of the held shared sensor parameters
+
+    def fitted(self, name):
+        return (name, True) in self.sensors
+
+    def has(self, name):
+        return (name, True) in self.sensors or (name, False) in self.sensors
 
 
 class Model(eqx.Module):
@@ -95,7 +87,29 @@ class Model(eqx.Module):
     layout: Layout
     scheme: object = eqx.field(static=True)
     torque: object = eqx.field(static=True)
-    substeps: int = eqx.field(static=True)
+    reinit: bool = eqx.field(static=True)  # a held control: no torque carried across a step's end
+    active: jax.Array  # int32 (): the first this many steps run; later samples are out of the window
+
+
+SENSOR_SIZES = {"gyro_bias": 3, "gyro_scale": 3, "gyro_delay": 1, "tracker_mount": 3, "tracker_delay": 1}
+
+
+def n_head(layout):
+    """Length of ``φ``'s shared head."""
+    leaves = sum(layout.leaves[index].size for index, _ in layout.shared_leaves)
+    return layout.n_inertia + leaves + sum(SENSOR_SIZES[n] for n in SHARED_SENSORS if layout.fitted(n))
+
+
+def n_own(layout):
+    """Length of each experiment's block of ``φ``."""
+    leaves = sum(layout.leaves[index].size for index in layout.own_leaves)
+    return 6 + leaves + (3 if layout.fitted("gyro_bias") else 0)
+
+
+def split(phi, layout):
+    """``φ`` as its head ``(n_head,)`` and the experiments' blocks ``(k, n_own)``."""
+    i = n_head(layout)
+    return phi[:i], phi[i:].reshape(layout.n_experiments, n_own(layout))
 
 
 def inertia_of(phi_inertia, layout):
@@ -117,65 +131,137 @@ def inertia_of(phi_inertia, layout):
     return inertia * layout.trace0 if layout.unit_scale else inertia
 
 
-def _shared(phi, layout):
-    """``(inertia (3, 3), args)`` from ``φ``'s shared head: the inertia and free-argument coordinates."""
+def shared_values(head, layout):
+    """``(inertia (3, 3), args leaves with the shared fitted ones set, shared sensor values)`` of the head."""
     i = layout.n_inertia
-    inertia = inertia_of(phi[:i], layout)
+    inertia = inertia_of(head[:i], layout)
     leaves = list(layout.leaves)
-    for index, positive in layout.free_leaves:
+    for index, positive in layout.shared_leaves:
         like = leaves[index]
-        value = phi[i : i + like.size].reshape(like.shape)
+        value = head[i : i + like.size].reshape(like.shape)
         leaves[index] = jnp.exp(value) if positive else value
         i += like.size
-    return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves)
+    sensors = dict(layout.held_sensors)
+    for name in SHARED_SENSORS:
+        if layout.fitted(name):
+            size = SENSOR_SIZES[name]
+            sensors[name] = head[i : i + size] if size > 1 else head[i]
+            i += size
+    return inertia, leaves, sensors
 
 
-def n_shared(layout):
-    """Length of ``φ``'s shared head: the rest is ``δq₀`` (k, 3) then ``ω₀`` (k, 3)."""
-    return layout.n_inertia + sum(layout.leaves[index].size for index, _ in layout.free_leaves)
+def own_values(own, layout, d):
+    """``(δq₀, ω₀, {leaf index: value}, gyro bias or None)`` of one experiment's block and data ``d``."""
+    values = {index: known for index, known in zip(layout.known_leaves, d.known, strict=True)}
+    i = 6
+    for index in layout.own_leaves:
+        like = layout.leaves[index]
+        values[index] = own[i : i + like.size].reshape(like.shape)
+        i += like.size
+    bias = own[i : i + 3] if layout.fitted("gyro_bias") else d.held_bias
+    return own[:3], own[3:6], values, bias
 
 
-def _split(phi, layout):
-    """``φ`` as its shared head, ``δq₀ (k, 3)`` and ``ω₀ (k, 3)``."""
-    i, k = n_shared(layout), layout.n_experiments
-    return phi[:i], phi[i : i + 3 * k].reshape(k, 3), phi[i + 3 * k : i + 6 * k].reshape(k, 3)
-
-
-def unpack(phi, layout):
-    """``(inertia (3, 3), args, δq₀ (k, 3), ω₀ (k, 3))`` from ``φ``."""
-    shared, dq, omega0 = _split(phi, layout)
-    return *_shared(shared, layout), dq, omega0
-
-
-def _one_states(shared, dq, omega0, d, model):
-    """Modelled ``q (P + 1, 4)``, ``ω (P + 1, 3)`` (world) of experiment ``d`` from its ``(δq₀, ω₀)``."""
-    inertia, args = _shared(shared, model.layout)
+def _parameters(head, own, d, layout):
+    """One experiment's ``(inertia, args, sensors, q₀, ω₀)`` from the head, its block and its data."""
+    inertia, leaves, sensors = shared_values(head, layout)
+    dq, omega0, values, bias = own_values(own, layout, d)
+    for index, value in values.items():
+        leaves[index] = value
+    if bias is not None:
+        sensors = sensors | {"gyro_bias": bias}
     q0 = quat.multiply(quat.exp(dq), d.q_start)
-    run_args = args if d.control_t is None else (args, d.control_t, d.control_tau)
-    return sample_states(
-        model.scheme, model.torque, run_args, body_inertia(inertia), q0, omega0, d.t, model.substeps
-    )
+    return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves), sensors, q0, omega0
 
 
-def _one_residuals(shared, dq, omega0, d, model):
-    """One experiment's whitened misfits ``(3 kinds, P + 1, 3)``, zero where not observed."""
-    return _misfits(*_one_states(shared, dq, omega0, d, model), d)
+def _step_args(model, d, user_args, j):
+    """The torque's ``args`` in step ``j`` (the user's, and the control held or ramping there)."""
+    if d.control_value is None:
+        return user_args
+    return user_args, (d.step_start[j], d.control_value[j], d.control_slope[j], d.control_body)
 
 
-def _misfits(q, omega, d):
-    """Whitened misfits ``(3 kinds, P + 1, 3)`` of the modelled ``q``, ``ω`` to experiment ``d``."""
-    r_q = signed_vector(q, d.q)
-    r_omega = quat.rotate(quat.conjugate(q), omega) - d.omega_body
+def _node_states(model, inertia, args, q0, omega0, d):
+    """The modelled states ``q (N + 1, 4)``, ``ω (N + 1, 3)`` at every node of the step grid."""
+    scheme, torque = model.scheme, model.torque
+
+    def one(inner, j):
+        def advance(inner):
+            step_args = _step_args(model, d, args, j)
+            if model.reinit:  # a carried torque is stale across a jump of the control
+                inner = scheme.init(scheme.state(inner), d.step_start[j], inertia, torque, step_args)
+            return scheme.step(inner, d.step_start[j], d.step_length[j], inertia, torque, step_args)
+
+        # Steps past the window are skipped, not masked: the predicate is the same for every experiment
+        # (not batched by their vmap), so the window's fit costs its share of the record.
+        inner = jax.lax.cond(j < model.active, advance, lambda inner: inner, inner)
+        return inner, scheme.state(inner)
+
+    state0 = RotState(q0, omega0)
+    carry = scheme.init(state0, d.step_start[0], inertia, torque, _step_args(model, d, args, 0))
+    _, states = jax.lax.scan(one, carry, jnp.arange(d.step_start.shape[0]))
+    return jnp.concatenate([q0[None], states.q]), jnp.concatenate([omega0[None], states.omega])
+
+
+def _states_at(model, inertia, args, nodes, d, times):
+    """The modelled states at arbitrary ``times`` ``(P + 1,)``: one step from the node before each."""
+    scheme, torque = model.scheme, model.torque
+    node_t = jnp.concatenate([d.step_start, d.step_start[-1:] + d.step_length[-1:]])
+    last = jnp.minimum(d.step_start.shape[0], model.active) - 1
+    # Past the window the nodes hold its last state: those samples (weight 0) get a short step from it.
+    times = jnp.minimum(times, node_t[last + 1])
+    j = jnp.clip(jnp.searchsorted(node_t, times, side="right").astype(INDEX) - 1, 0, last)
+
+    def one(j, s):
+        step_args = _step_args(model, d, args, j)
+        if d.control_value is not None:  # outside the record, the control as it runs there
+            edge = jnp.where(s < node_t[0], 0, 1)
+            outside = (s < node_t[0]) | (s > node_t[-1])
+            value = jnp.where(outside, d.control_edges[edge, 0], d.control_value[j])
+            slope = jnp.where(outside, d.control_edges[edge, 1], d.control_slope[j])
+            step_args = (args, (node_t[j], value, slope, d.control_body))
+        carry = scheme.init(RotState(nodes[0][j], nodes[1][j]), node_t[j], inertia, torque, step_args)
+        return scheme.state(scheme.step(carry, node_t[j], s - node_t[j], inertia, torque, step_args))
+
+    states = jax.vmap(one)(j, times)
+    return states.q, states.omega
+
+
+def _one(head, own, d, model):
+    """One experiment's whitened misfits ``(3 kinds, P + 1, 3)`` and modelled states at its samples."""
+    layout = model.layout
+    inertia, args, sensors, q0, omega0 = _parameters(head, own, d, layout)
+    prepared = body_inertia(inertia)
+    nodes = _node_states(model, prepared, args, q0, omega0, d)
+    q, omega = nodes[0][d.sample_node], nodes[1][d.sample_node]
+
+    q_seen = q
+    if layout.has("tracker_delay"):
+        q_seen, _ = _states_at(model, prepared, args, nodes, d, d.t - sensors["tracker_delay"])
+    if layout.has("tracker_mount"):
+        q_seen = quat.multiply(q_seen, quat.exp(sensors["tracker_mount"])[None, :])
+    q_gyro, omega_gyro = q, omega
+    if layout.has("gyro_delay"):
+        q_gyro, omega_gyro = _states_at(model, prepared, args, nodes, d, d.t - sensors["gyro_delay"])
+    gyro = quat.rotate(quat.conjugate(q_gyro), omega_gyro)
+    if layout.has("gyro_scale"):
+        gyro = sensors["gyro_scale"][None, :] * gyro
+    if "gyro_bias" in sensors:
+        gyro = gyro + sensors["gyro_bias"][None, :]
+
+    r_q = signed_vector(q_seen, d.q)
+    r_omega = gyro - d.omega_body
     r_direction = quat.rotate(q, d.body_vector[None, :]) - d.direction
-    r = jnp.stack([r_q, r_omega, r_direction])
-    return r * (d.weight / d.sigma[:, None])[..., None]
+    weight = d.weight * (d.sample_node <= model.active).astype(d.weight.dtype)[None, :]
+    r = jnp.stack([r_q, r_omega, r_direction]) * (weight / d.sigma[:, None])[..., None]
+    return r, q, omega
 
 
 def states(phi, model):
     """Modelled ``q (k, P + 1, 4)``, ``ω (k, P + 1, 3)`` (world frame) at every padded sample."""
-    shared, dq, omega0 = _split(phi, model.layout)
-    one = lambda dq, omega0, d: _one_states(shared, dq, omega0, d, model)  # noqa: E731
-    return jax.vmap(one)(dq, omega0, model.data)
+    head, own = split(phi, model.layout)
+    _, q, omega = jax.vmap(lambda own, d: _one(head, own, d, model))(own, model.data)
+    return q, omega
 
 
 def residuals(phi, model):
@@ -183,48 +269,56 @@ def residuals(phi, model):
 
     Experiment-major: experiment ``j``'s ``3 (P + 1) 3`` misfits, kind by kind, then ``j + 1``'s.
     """
-    shared, dq, omega0 = _split(phi, model.layout)
-    one = lambda dq, omega0, d: _one_residuals(shared, dq, omega0, d, model)  # noqa: E731
-    return jax.vmap(one)(dq, omega0, model.data).reshape(-1)
+    head, own = split(phi, model.layout)
+    r, _, _ = jax.vmap(lambda own, d: _one(head, own, d, model))(own, model.data)
+    return r.reshape(-1)
 
 
 def residuals_and_jacobian(phi, model):
     """`residuals`, their Jacobian ``(m, len(φ))`` and `states`, in forward mode, experiment by experiment.
 
-    Experiment ``j`` depends on the shared head of ``φ`` and on its own ``(δq₀, ω₀)``
-    only, so each rollout carries ``n_shared + 6`` tangents instead of ``len(φ)``
-    (15 instead of 27 for the three-manoeuvre satellite); the zero blocks of the
-    other experiments' starts are filled in afterwards. The modelled states ride
-    along (the rollout's primal), so a fit needs no separate program for them.
+    Experiment ``j`` depends on the head of ``φ`` and on its own block only, so each rollout
+    carries ``n_head + n_own`` tangents instead of ``len(φ)`` (15 instead of 27 for the
+    three-manoeuvre satellite); the zero blocks of the other experiments are filled in
+    afterwards. The modelled states ride along (the rollout's primal), so a fit needs no
+    separate program for them.
     """
-    shared, dq, omega0 = _split(phi, model.layout)
+    head, own = split(phi, model.layout)
     k = model.layout.n_experiments
 
-    def one(dq, omega0, d):
-        def twice(shared, own):
-            q, omega = _one_states(shared, own[:3], own[3:], d, model)
-            r = _misfits(q, omega, d).reshape(-1)
+    def one(own, d):
+        def twice(head, own):
+            r, q, omega = _one(head, own, d, model)
+            r = r.reshape(-1)
             return r, (r, q, omega)
 
-        (j_shared, j_own), (r, q, omega) = jax.jacfwd(twice, argnums=(0, 1), has_aux=True)(
-            shared, jnp.concatenate([dq, omega0])
-        )
-        return r, j_shared, j_own, q, omega
+        (j_head, j_own), (r, q, omega) = jax.jacfwd(twice, argnums=(0, 1), has_aux=True)(head, own)
+        return r, j_head, j_own, q, omega
 
-    # (k, m), (k, m, n_shared), (k, m, 6), (k, P + 1, 4), (k, P + 1, 3)
-    r, j_shared, j_own, q, omega = jax.vmap(one)(dq, omega0, model.data)
+    # (k, m), (k, m, n_head), (k, m, n_own), (k, P + 1, 4), (k, P + 1, 3)
+    r, j_head, j_own, q, omega = jax.vmap(one)(own, model.data)
+    m, width = r.shape[1], j_own.shape[2]
     eye = jnp.eye(k, dtype=phi.dtype)
-    m = r.shape[1]
-
-    def block_diagonal(block):  # (k, m, 3) → (k m, 3 k), experiment j's block in columns 3j … 3j + 2
-        return (block[:, :, None, :] * eye[:, None, :, None]).reshape(k * m, 3 * k)
-
-    jac = jnp.concatenate(
-        [j_shared.reshape(k * m, -1), block_diagonal(j_own[..., :3]), block_diagonal(j_own[..., 3:])], axis=1
-    )
+    # (k, m, width) → (k m, k width): experiment j's block in columns j width … (j + 1) width − 1
+    blocks = (j_own[:, :, None, :] * eye[:, None, :, None]).reshape(k * m, k * width)
+    jac = jnp.concatenate([j_head.reshape(k * m, -1), blocks], axis=1)
     return r.reshape(-1), jac, (q, omega)
 
 
 def pad_rows(x, length):
     """``x`` ``(n, ...)`` padded to ``length`` rows by repeating its last row."""
     return np.concatenate([x, np.repeat(x[-1:], length - x.shape[0], axis=0)])
+
+
+def unpack(phi, layout, data):
+    """All fitted values: ``(inertia (3, 3), args, q₀ (k, 4), ω₀ (k, 3), sensors)``; per-experiment leaves
+    of ``args`` and the gyro bias with a leading axis ``k``."""
+    head, own = split(phi, layout)
+    inertia, leaves, sensors = shared_values(head, layout)
+    dq, omega0, values, bias = jax.vmap(lambda o, d: own_values(o, layout, d))(own, data)
+    for index, value in values.items():
+        leaves[index] = value
+    if bias is not None:
+        sensors = sensors | {"gyro_bias": bias}
+    q0 = quat.multiply(quat.exp(dq), data.q_start)
+    return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves), q0, omega0, sensors

@@ -25,11 +25,17 @@ def _log_difference_np(p, q):
 
 
 _rotated = jax.jit(quat.rotate)  # as `_log_of_difference`: eagerly, ~30 single-op programs
+_multiplied = jax.jit(quat.multiply)
 
 
 def rotate_np(q, v):
     """`jaxrot.quaternion.rotate` of NumPy arrays, compiled once per shape, as a NumPy array."""
     return np.asarray(_rotated(jnp.asarray(q), jnp.asarray(v)))
+
+
+def multiply_np(p, q):
+    """`jaxrot.quaternion.multiply` of NumPy arrays, compiled once per shape, as a NumPy array."""
+    return np.asarray(_multiplied(jnp.asarray(p), jnp.asarray(q)))
 
 
 @jax.jit(static_argnums=0)
@@ -68,13 +74,14 @@ def estimate_omega(t, q):
     return omega
 
 
-def _linear_estimate(t, q, omega, torque, args, dtype):
+def _linear_estimate(t, q, omega, torque, args, dtype, extra_impulse=None):
     """Inertia from the angular-momentum balance ``R_k I ω_b,k − L₀ = ∫₀^{t_k} τ dt``, linear in ``(I, L₀)``.
 
     Torque-free the system is homogeneous: ``(I, L₀)`` is its smallest right
     singular vector, normalised to ``tr I = 1``. With a torque the impulse on the
     right fixes the scale (least squares). Noisy ``ω`` makes this a rough but
-    unbiased-enough start; the gradient fit then refines it.
+    unbiased-enough start; the gradient fit then refines it. ``extra_impulse`` ``(n, 3)``:
+    a known impulse from ``t[0]`` to each sample (a control's) added to the torque's.
     """
     rot = np.asarray(quat.to_matrix(jnp.asarray(q)))
     w_b = np.einsum("kji,kj->ki", rot, omega)  # R_kᵀ ω_k
@@ -90,22 +97,25 @@ def _linear_estimate(t, q, omega, torque, args, dtype):
         axis=1,
     )  # (n, 3, 6)
     rows = np.concatenate([rot @ a, np.broadcast_to(-np.eye(3), (len(t), 3, 3))], axis=-1).reshape(-1, 9)
-    if torque is None:
+    scale_free = torque is None and extra_impulse is None
+    if scale_free:
         _, _, vt = np.linalg.svd(rows, full_matrices=False)
         x = vt[-1]
     else:
-        tau = _torques_at(
-            torque, jnp.asarray(t, dtype), jnp.asarray(q, dtype), jnp.asarray(omega, dtype), args
-        )
-        tau = np.asarray(tau, dtype=np.float64)
-        impulse = np.concatenate(
-            [np.zeros((1, 3)), np.cumsum(0.5 * (tau[1:] + tau[:-1]) * np.diff(t)[:, None], 0)]
-        )
+        impulse = np.zeros((len(t), 3)) if extra_impulse is None else np.asarray(extra_impulse, np.float64)
+        if torque is not None:
+            tau = _torques_at(
+                torque, jnp.asarray(t, dtype), jnp.asarray(q, dtype), jnp.asarray(omega, dtype), args
+            )
+            tau = np.asarray(tau, dtype=np.float64)
+            impulse = impulse + np.concatenate(
+                [np.zeros((1, 3)), np.cumsum(0.5 * (tau[1:] + tau[:-1]) * np.diff(t)[:, None], 0)]
+            )
         x, *_ = np.linalg.lstsq(rows, impulse.reshape(-1), rcond=None)
     xx, yy, zz, xy, xz, yz = x[:6]
     inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
     momentum = x[6:]
-    if torque is None:
+    if scale_free:
         trace = np.trace(inertia)
         if trace == 0:
             return np.eye(3) / 3, None
