@@ -111,7 +111,8 @@ def test_mujoco_free_joint_is_scalar_first_body_to_world_with_body_frame_rates()
     local body frame; `mj_integratePos` calls `mju_quatIntegrate`, ``q ← q ⊗ exp(ω dt)``). Checked on
     MuJoCo itself: its world-frame rate, one position update, and a symmetric top (moments 1, 1, 2)
     stepped 1000 times with RK4 against the closed form ``q(t) = exp(L t / I⊥) ⊗ q₀ ⊗ exp(−λ t e_z)``,
-    ``λ = (I₃ − I⊥) ω_b,z / I⊥`` (Landau & Lifshitz §33), read with `from_body` / `omega_body`."""
+    ``λ = (I₃ − I⊥) ω_b,z / I⊥`` (Landau & Lifshitz §33), read with `from_body` / `omega_body`; and
+    the frames of its two applied torques."""
     mujoco = pytest.importorskip("mujoco")
     xml = """<mujoco><option gravity="0 0 0" timestep="0.001" integrator="RK4"/><worldbody>
       <body><freejoint/><inertial pos="0 0 0" mass="1" diaginertia="1 1 2"/></body></worldbody></mujoco>"""
@@ -147,3 +148,22 @@ def test_mujoco_free_joint_is_scalar_first_body_to_world_with_body_frame_rates()
     omega_body_t = quat.rotate(quat.conjugate(spin), jnp.asarray(w_body))
     np.testing.assert_allclose(after.omega_body, omega_body_t, atol=1e-10)
     np.testing.assert_allclose(after.omega, quat.rotate(q_t, omega_body_t), atol=1e-10)
+    # qvel taken for a world-frame rate: the same closed form from that state ends far from MuJoCo's run.
+    wrong = jaxrot.RotState(jnp.asarray(q0), jnp.asarray(w_body))
+    w_wrong = wrong.omega_body
+    spin_wrong = quat.exp(jnp.array([0.0, 0.0, -w_wrong[2] * data.time]))
+    momentum_wrong = quat.rotate(wrong.q, jnp.array([1.0, 1.0, 2.0]) * w_wrong)
+    q_wrong = quat.multiply(quat.multiply(quat.exp(momentum_wrong * data.time), wrong.q), spin_wrong)
+    assert float(quat.angle_between(after.q, q_wrong)) > 0.5  # measured 0.96 rad
+
+    # Torques: xfrc_applied[b, 3:6] is world frame, qfrc_applied[3:6] body frame (at rest: I ω̇_b = τ_b).
+    torque = jnp.array([0.2, -0.5, 0.7])
+    torque_body = np.asarray(quat.rotate(quat.conjugate(after.q), torque))
+    data.qvel[:] = 0
+    data.xfrc_applied[1, 3:6] = torque
+    mujoco.mj_forward(model, data)
+    np.testing.assert_allclose(data.qacc[3:6], torque_body / np.array([1.0, 1.0, 2.0]), rtol=0, atol=1e-12)
+    data.xfrc_applied[:] = 0
+    data.qfrc_applied[3:6] = torque_body
+    mujoco.mj_forward(model, data)
+    np.testing.assert_allclose(data.qacc[3:6], torque_body / np.array([1.0, 1.0, 2.0]), rtol=0, atol=1e-12)
