@@ -302,7 +302,7 @@ def _polar_factor(m):
     """The orthogonal factor ``R`` of ``m = R H`` (``H`` symmetric positive definite), ``(..., 3, 3)``.
 
     Newton's iteration ``X ← ½ (γX + (γX)⁻ᵀ)`` with the determinant scaling
-    ``γ = |det X|^(-1/3)`` (Higham, *Functions of Matrices*, SIAM 2008, §8.6),
+    ``γ = |det X|^(-1/3)`` (Higham, *Functions of Matrices*, SIAM 2008, ch. 8),
     a fixed number of steps. Unlike an SVD, whose derivative divides by
     differences of singular values (all equal at a rotation), each step is
     smooth: gradients are finite at exact rotations. ``(γX)⁻ᵀ`` is the cofactor
@@ -349,7 +349,7 @@ def from_matrix(m, *, tol=MATRIX_TOL):
         >>> print(np.round(quat.from_matrix(m), 6))
         [0.707107 0.       0.       0.707107]
         >>> printed = jnp.array([[0.866, -0.5, 0.0], [0.5, 0.866, 0.0], [0.0, 0.0, 1.0]])  # 30°, 3 digits
-        >>> bool(abs(jnp.linalg.norm(quat.from_matrix(printed)) - 1) < 1e-15)  # unit: no longer 4e-5 off
+        >>> bool(abs(jnp.linalg.norm(quat.from_matrix(printed)) - 1) < 1e-15)  # unit to round-off
         True
         >>> quat.from_matrix(2 * m)  # doctest: +ELLIPSIS
         Traceback (most recent call last):
