@@ -23,22 +23,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._concrete import is_concrete as is_concrete
 from ._inertia import MathematicalBody
 from ._state import RotState
 
 
 QUATERNION_NORM_TOL = 1e-6
 SUPPORTED_DTYPES = ("float32", "float64")
-
-
-def is_concrete(*xs) -> bool:
-    """Whether every leaf can be read here: not a tracer, nor an array spread over several processes
-    (a multi-process run's global array; its values live on other hosts, so its checks are skipped
-    as under ``jit``)."""
-    return not any(
-        isinstance(leaf, jax.core.Tracer) or not getattr(leaf, "is_fully_addressable", True)
-        for leaf in jax.tree_util.tree_leaves(xs)
-    )
 
 
 def check_values(x, failed, message, error=ValueError):

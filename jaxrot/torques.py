@@ -29,6 +29,8 @@ Example:
     (11, 2, 4)
 """
 
+import math
+from collections.abc import Callable
 from typing import ClassVar
 
 import equinox as eqx
@@ -91,11 +93,19 @@ class Sum(TorqueModel):
 
 
 def _per_body_energy(fn, t, q, params):
-    """Sum over bodies ``q`` ``(N, 4)`` of a one-body potential ``fn(t, q_i, params_i)``."""
+    """Sum over bodies ``q`` ``(N, 4)`` of a one-body potential ``fn(t, q_i, params_i)``.
+
+    A `per_body` leaf's leading particle axes (any number, ``N`` values in all) are
+    flattened to one; its trailing axes reach ``fn`` as they are.
+    """
+
+    def rows(x):
+        value = x.value
+        n_axes = next(k for k in range(1, value.ndim + 1) if math.prod(value.shape[:k]) == q.shape[0])
+        return value.reshape(q.shape[0], *value.shape[n_axes:])
+
     axes = jax.tree_util.tree_map(lambda x: 0 if is_per_body(x) else None, params, is_leaf=is_per_body)
-    values = jax.tree_util.tree_map(
-        lambda x: x.value.reshape(q.shape[0], -1) if is_per_body(x) else x, params, is_leaf=is_per_body
-    )
+    values = jax.tree_util.tree_map(lambda x: rows(x) if is_per_body(x) else x, params, is_leaf=is_per_body)
     return jnp.sum(jax.vmap(fn, in_axes=(None, 0, axes))(t, q, values))
 
 
@@ -231,3 +241,68 @@ class DipoleInteraction(TorqueModel):
         p = unwrap_per_body(args[self.key])
         forces = -jax.grad(lambda r: self.energy(t, q, args, positions=r))(p["positions"])
         return jnp.sum(jnp.cross(p["positions"], forces), axis=0)
+
+
+class Potential(TorqueModel):
+    """The torque of a potential energy ``energy(t, q, args) -> scalar`` of one body, by differentiation.
+
+    ``q`` is the body's orientation ``(4,)`` (scalar first, body → world) and
+    ``args`` its parameters: ``args[key]``, or the whole ``args`` when ``key`` is
+    None (the default); `jaxrot.per_body` leaves arrive as this body's row. A
+    world-frame rotation ``δθ`` of the body, ``q → exp(δθ) ⊗ q``, changes the
+    energy by ``−τ·δθ``, so the world-frame torque is
+
+        ``τ = −∂/∂δθ energy(t, exp(δθ) ⊗ q, args)`` at ``δθ = 0``,
+
+    one reverse-mode pass through ``energy`` (``exp`` has an exact, finite
+    derivative at 0, so ``τ`` is finite wherever ``energy``'s gradient is). Only
+    the rotation of ``q`` counts: a change of ``|q|`` does nothing. Works under
+    ``jit``, ``vmap`` and ``grad`` (of the torque or a rollout through it, with
+    respect to ``args``: fits). ``energy`` may be any callable, an
+    ``equinox.Module`` with array fields included (those are traced, not
+    baked in).
+
+    ``model.energy(t, q, args)`` is the total over bodies ``q`` ``(N, 4)``, for
+    energy checks; with an explicitly time-dependent ``energy`` the total
+    changes at the rate ``∂energy/∂t``. One body's energy only: an interaction
+    of several bodies is a coupled model (`DipoleInteraction`). Same numbers as
+    the built-in models: `Gravity` is ``Potential(lambda t, q, p: -p["weight"] @
+    rotate(q, p["offset_body"]), key="gravity")`` (``tests/test_potential.py``).
+
+    Example:
+        >>> import jax.numpy as jnp, jaxrot
+        >>> from jaxrot import quaternion as quat, torques
+        >>> def nematic(t, q, p):  # −k (n·u)²: the body axis u = body z pulled to ±n, either way
+        ...     return -p["k"] * jnp.dot(p["n"], quat.rotate(q, jnp.array([0.0, 0, 1]))) ** 2
+        >>> model = torques.Potential(nematic, key="nematic") + torques.ViscousDrag()
+        >>> args = {"nematic": {"k": 2.0, "n": jnp.array([1.0, 0, 0])}, "drag": {"coefficient": 0.5}}
+        >>> q = quat.from_axis_angle(jnp.array([0.0, 1, 0]), jnp.pi / 4)  # body z halfway to world x
+        >>> print(model(0.0, q, jnp.zeros(3), args).round(6).tolist())  # 2k (n·u) u × n
+        [0.0, 2.0, 0.0]
+    """
+
+    energy_fn: Callable
+    key: str | None = eqx.field(static=True)
+    conservative: ClassVar[bool] = True
+
+    def __init__(self, energy: Callable, key: str | None = None):
+        if not callable(energy):
+            raise ValueError(
+                f"`energy` must be a callable energy(t, q, args) -> scalar; got {type(energy).__name__}."
+            )
+        self.energy_fn = energy
+        self.key = key
+
+    def _params(self, args):
+        return args if self.key is None else args[self.key]
+
+    def __call__(self, t, q, omega, args):
+        params = self._params(args)
+
+        def turned(delta):
+            return self.energy_fn(t, quat.multiply(quat.exp(delta), q), params)
+
+        return -jax.grad(turned)(jnp.zeros_like(q[..., 1:]))
+
+    def energy(self, t, q, args):
+        return _per_body_energy(self.energy_fn, t, q, self._params(args))

@@ -14,7 +14,9 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-PAGES = [README] + [ROOT / "docs" / page for page in ("scenes.md", "performance.md", "diffrax.md")]
+PAGES = [README] + [
+    ROOT / "docs" / page for page in ("scenes.md", "performance.md", "diffrax.md", "conventions.md")
+]
 README_BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.DOTALL)
 BLOCKS = [b for page in PAGES for b in re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.DOTALL)]
 # The multi-host example (docs/performance.md) needs a cluster (jax.distributed); every other block runs.
@@ -29,11 +31,21 @@ def test_the_readme_has_its_examples():
     assert len(BLOCKS) == len(RUNNABLE) + 1 >= 4
 
 
-# The diffrax example compiles adaptive order-8 solves (~30 s); tests/test_solver.py checks the same API
-# by default, and the example itself runs in the slow set.
+def _marks(block):
+    """The diffrax example compiles adaptive order-8 solves (~30 s); tests/test_solver.py checks the same
+    API by default, and the example itself runs in the slow set. A block that imports a peer that is not
+    installed (the conventions page's MuJoCo example) is skipped, naming it."""
+    marks = [pytest.mark.slow] if "diffeqsolve" in block else []
+    imported = re.findall(r"^(?:import|from) (\w+)", block, flags=re.MULTILINE)
+    missing = sorted({name for name in imported if importlib.util.find_spec(name) is None})
+    if missing:
+        marks.append(pytest.mark.skip(reason=f"needs {', '.join(missing)} (not installed)"))
+    return marks
+
+
 @pytest.mark.parametrize(
     "code",
-    [pytest.param(b, marks=pytest.mark.slow if "diffeqsolve" in b else ()) for b in RUNNABLE],
+    [pytest.param(b, marks=_marks(b)) for b in RUNNABLE],
     ids=[b.splitlines()[-1][:40] for b in RUNNABLE],
 )
 def test_readme_example_runs(code, tmp_path):

@@ -23,4 +23,4 @@ def principal_axes(inertia):
     det = jnp.dot(rot[:, 0], jnp.cross(rot[:, 1], rot[:, 2]))
     sign = jnp.where(det < 0, -1, 1).astype(rot.dtype)
     rot = jnp.concatenate([sign * rot[:, :1], rot[:, 1:]], axis=1)
-    return moments, quat.from_matrix(rot)
+    return moments, quat._from_orthogonal_matrix(rot)
