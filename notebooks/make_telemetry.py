@@ -3,10 +3,12 @@
     python notebooks/make_telemetry.py   # jaxrot/data/satellite_telemetry.npz, heavy_top_axis.npz
 
 Both records come from `jaxrot.reference_rollout` (diffrax Dopri8 at 1e-12), with seeded noise:
-- a small satellite, three 10-minute manoeuvres under known magnetorquer torques and the torque of
-  an unknown residual magnetic dipole in the geomagnetic field: star tracker (1e-4 rad per axis,
-  a body-frame rotation), gyro (2e-5 rad/s per axis, body frame), 121 samples each; the tracker
-  drops 5 % of its samples (NaN rows);
+- a small satellite, three 10-minute manoeuvres under known reaction-wheel torques (body frame,
+  each command held for 20 s) and the torque of an unknown residual magnetic dipole in the
+  geomagnetic field, seen through flight-like sensors: a star tracker mounted 1.4° off the body
+  axes (1e-4 rad per axis of noise), a gyro with a bias per manoeuvre and a scale factor off by
+  0.1-0.3 % (2e-5 rad/s per axis of noise), 121 samples each; the tracker drops 5 % of its
+  samples (NaN rows);
 - a heavy asymmetric top seen through one body axis (a camera tracking a marker): 1e-3 rad noise
   across the direction, 241 samples over 6 s; its centre-of-mass offset is the unknown.
 """
@@ -39,29 +41,33 @@ def satellite(rng):
     inertia = np.array([[0.040, 0.002, -0.001], [0.002, 0.050, 0.0015], [-0.001, 0.0015, 0.060]])
     dipole = np.array([0.03, -0.02, 0.015])
     sigma_q, sigma_omega, n = 1e-4, 2e-5, 121
+    mount = np.array([0.02, -0.015, 0.01])  # rad: the tracker's frame in the body frame
+    scale = np.array([1.003, 0.998, 1.001])
+    bias = rng.normal(size=(3, 3)) * 2e-4  # rad/s, one per manoeuvre
     record = {"inertia": inertia, "dipole": dipole, "sigma_q": sigma_q, "sigma_omega": sigma_omega}
     record |= {"field_tesla": FIELD_TESLA, "orbit_s": ORBIT_S}
+    record |= {"tracker_mount": mount, "gyro_scale": scale, "gyro_bias": bias}
     for k in range(3):
         q0 = quat.normalize(jnp.asarray(rng.normal(size=4)))
         omega0 = jnp.asarray(rng.normal(size=3) * 0.02)
         t = np.linspace(0.0, 600.0, n)
-        t_c = np.linspace(0.0, 600.0, 13)
-        commanded = rng.normal(size=(13, 3)) * 0.2  # magnetorquer dipole, A m², world frame
-        tau_c = np.cross(commanded, np.asarray(jax.vmap(geomagnetic_field)(jnp.asarray(t_c))))
+        t_c = np.arange(0.0, 600.0, 20.0) + 7.0  # a wheel command every 20 s, between samples
+        tau_c = rng.normal(size=(t_c.size, 3)) * 5e-6  # N m, body frame
 
         def torque(tt, q, omega, args, t_c=t_c, tau_c=tau_c):
-            control = jnp.stack([jnp.interp(tt, t_c, tau_c[:, i]) for i in range(3)])
-            return jnp.cross(quat.rotate(q, args["dipole"]), geomagnetic_field(tt)) + control
+            index = jnp.searchsorted(jnp.asarray(t_c), tt, side="right") - 1
+            held = jnp.where(index >= 0, jnp.asarray(tau_c)[jnp.maximum(index, 0)], 0.0)
+            return jnp.cross(quat.rotate(q, args["dipole"]), geomagnetic_field(tt)) + quat.rotate(q, held)
 
         ref = jaxrot.reference_rollout(
             jaxrot.RotState(q0, omega0), jnp.asarray(inertia), jnp.asarray(t), torque=torque,
-            args={"dipole": jnp.asarray(dipole)},
+            args={"dipole": jnp.asarray(dipole)}, jump_ts=jnp.asarray(t_c),
         )  # fmt: skip
-        q = np.array(quat.multiply(ref.q, quat.exp(jnp.asarray(rng.normal(size=(n, 3)) * sigma_q))))
+        seen = quat.multiply(ref.q, quat.exp(jnp.asarray(mount))[None, :])
+        q = np.array(quat.multiply(seen, quat.exp(jnp.asarray(rng.normal(size=(n, 3)) * sigma_q))))
         q[rng.random(n) < 0.05] = np.nan
-        omega_body = (
-            np.asarray(quat.rotate(quat.conjugate(ref.q), ref.omega)) + rng.normal(size=(n, 3)) * sigma_omega
-        )
+        omega_body = np.asarray(quat.rotate(quat.conjugate(ref.q), ref.omega))
+        omega_body = scale * omega_body + bias[k] + rng.normal(size=(n, 3)) * sigma_omega
         record |= {f"t{k}": t, f"q{k}": q, f"omega_body{k}": omega_body, f"control_t{k}": t_c}
         record |= {
             f"control_tau{k}": tau_c,

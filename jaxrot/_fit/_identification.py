@@ -104,5 +104,9 @@ class Identification(NamedTuple):
 
     def plot_residuals(self):
         """A matplotlib figure of the whitened residuals against time: a row per experiment, a column per
-        sensor (tracker, gyro, tracked direction), the three components and the ±2 band."""
+        sensor (tracker, gyro, tracked direction), the three components and the ±2 band.
+
+        Returns a `matplotlib.figure.Figure` that pyplot does not hold (no global state to close):
+        a notebook shows it as a cell's value once pyplot is imported; elsewhere ``fig.savefig(path)``.
+        """
         return _report.plot_residuals(self)
