@@ -24,7 +24,7 @@ timed once (``--timing-steps`` steps, median of ``--repeats``) and its cost per 
 every rung; the errors come from one untimed ``one_model`` run per rung. jaxrot's side: every scheme
 in `jaxrot.SCHEMES` through `jaxrot.rollout`, each rung timed (the rotor schemes' cost depends on
 the step), compiled with `jaxrot.compiler_options`. Both ladders halve the step from
-``--t-end / 125`` until the error is below 1e-12, stops falling, or the number of steps passes
+``--t-end / 32`` until the error is below 1e-12, stops falling, or the number of steps passes
 ``--max-steps`` (or, timed, a jaxrot run passes ``--time-cap``). ``--no-timing`` measures the
 errors only (the timing fields null, every ladder to its end): errors do not depend on the
 machine's load, timings do.
@@ -97,7 +97,9 @@ def _orientations(data, joint):
 
 
 def mujoco_final(integrator, q, omega_body, dt, n_steps, joint="free"):
-    """MuJoCo's orientations after ``n_steps`` steps of ``dt`` (one model, ``mj_step``)."""
+    """MuJoCo's orientations after ``n_steps`` steps of ``dt`` (one model, ``mj_step``), or None where
+    the run went unstable: MuJoCo then warns (mjWARN_BADQACC) and resets the state to ``qpos0``, whose
+    identity orientations would pass for an answer ~π off."""
     import mujoco
 
     model = mujoco.MjModel.from_xml_string(model_xml(len(q), integrator, dt, joint))
@@ -105,6 +107,8 @@ def mujoco_final(integrator, q, omega_body, dt, n_steps, joint="free"):
     _set_state(model, data, q, omega_body, joint)
     for _ in range(n_steps):
         mujoco.mj_step(model, data)
+    if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        return None
     return _orientations(data, joint)
 
 
@@ -185,11 +189,14 @@ def mujoco_path_costs(q, omega_body, integrator, steps, repeats, joints, dt=1e-3
 
 
 def max_angle(q, q_ref):
+    """The largest geodesic angle between two batches of orientations; None for a blown-up run."""
+    if q is None:
+        return None
     error = float(jnp.max(quat.angle_between(jnp.asarray(q), jnp.asarray(q_ref))))
-    return error if np.isfinite(error) else float("inf")
+    return error if np.isfinite(error) else None
 
 
-def ladder(max_steps, start=125):
+def ladder(max_steps, start=32):
     """Step counts from ``start``, doubling, up to ``max_steps``."""
     n_steps = start
     while n_steps <= max_steps:
@@ -199,7 +206,7 @@ def ladder(max_steps, start=125):
 
 def _done(error, previous):
     """The ladder stops at the floor, or where the error stopped falling below the saturated range."""
-    return error < FLOOR or (error < ASYMPTOTIC and error > 0.7 * previous)
+    return error is not None and (error < FLOOR or (error < ASYMPTOTIC and error > 0.7 * previous))
 
 
 def mujoco_rows(q, omega_body, q_ref, t_end, max_steps, log=print):
@@ -217,10 +224,10 @@ def mujoco_rows(q, omega_body, q_ref, t_end, max_steps, log=print):
                     "error_rad": error,
                 }
             )
-            log(f"mujoco_{integrator:13s} {n_steps:7d} steps  error {error:.3e} rad")
+            log(f"mujoco_{integrator:13s} {n_steps:7d} steps  error {error} rad")
             if _done(error, previous):
                 break
-            previous = error
+            previous = float("inf") if error is None else error
     return rows
 
 
@@ -272,7 +279,7 @@ def orders(rows):
     """Per method, the slope of log(error) against log(dt) over its rungs in (10·FLOOR, ASYMPTOTIC)."""
     out = {}
     for name in dict.fromkeys(r["method"] for r in rows):
-        mine = [r for r in rows if r["method"] == name and 10 * FLOOR < r["error_rad"] < ASYMPTOTIC]
+        mine = [r for r in rows if r["method"] == name and 10 * FLOOR < (r["error_rad"] or 1.0) < ASYMPTOTIC]
         out[name] = (
             fit_order([r["dt"] for r in mine], [r["error_rad"] for r in mine]) if len(mine) >= 2 else None
         )
@@ -285,7 +292,11 @@ def budgets(rows):
     for budget in BUDGETS:
         best = {}
         for side in ("mujoco", "jaxrot"):
-            meeting = [r for r in rows if r["side"] == side and r["error_rad"] <= budget and r["us_per_body"]]
+            meeting = [
+                r
+                for r in rows
+                if r["side"] == side and (r["error_rad"] or 1e9) <= budget and r["us_per_body"]
+            ]
             best[side] = min(meeting, key=lambda r: r["us_per_body"]) if meeting else None
         m, j = best["mujoco"], best["jaxrot"]
         out.append(
@@ -319,6 +330,7 @@ def plot(rows, path):
             color=next(colours),
             linestyle="--" if mine[0]["side"] == "mujoco" else "-",
         )
+        mine = [r for r in mine if r["error_rad"] is not None]  # blown-up rungs are left out
         axes[0].loglog([r["dt"] for r in mine], [r["error_rad"] for r in mine], **style)
         if timed:
             axes[1].loglog([r["us_per_body"] for r in mine], [r["error_rad"] for r in mine], **style)
@@ -336,7 +348,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=1000, help="bodies")
     parser.add_argument("--t-end", type=float, default=10.0)
-    parser.add_argument("--max-steps", type=int, default=64000, help="the ladders' last rung at most")
+    parser.add_argument("--max-steps", type=int, default=65536, help="the ladders' last rung at most")
     parser.add_argument("--timing-steps", type=int, default=500, help="MuJoCo steps per timed run")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--time-cap", type=float, default=5.0, help="s; a jaxrot run longer ends its ladder")
