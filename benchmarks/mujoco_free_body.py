@@ -10,7 +10,7 @@ bodies at the final time.
 
 MuJoCo's side: its integrators Euler (semi-implicit), implicit, implicitfast and RK4, gravity,
 contacts and constraints off, each body on its own free joint (``qpos[3:7]`` its orientation,
-scalar first, body → world; ``qvel[3:6]`` its angular velocity in the **body** frame), and three
+scalar first, body → world; ``qvel[3:6]`` its angular velocity in the **body** frame), and the
 ways to run it, each timed:
 
 - ``one_model``: one model holding all bodies, ``mj_step`` in a Python loop (the issue's cheapest);
@@ -21,9 +21,11 @@ ways to run it, each timed:
 
 A MuJoCo step costs the same at any step size (no contacts, no solver iterations), so each path is
 timed once (``--timing-steps`` steps, median of ``--repeats``) and its cost per body-step applies to
-every rung; the errors come from one untimed ``one_model`` run per rung. jaxrot's side: every scheme
-in `jaxrot.SCHEMES` through `jaxrot.rollout`, each rung timed (the rotor schemes' cost depends on
-the step), compiled with `jaxrot.compiler_options`. Both ladders halve the step from
+every rung; the errors come from one untimed run per rung of one-body rollouts on a thread pool
+(the same orbits as one model's, bit for bit: ``path_agreement_rad``; one model of 1000 bodies costs
+the implicit integrator tens of µs per body-step, seen on a loaded machine). jaxrot's side: every
+scheme in `jaxrot.SCHEMES` through `jaxrot.rollout`, each rung timed (the rotor schemes' cost
+depends on the step), compiled with `jaxrot.compiler_options`. Both ladders halve the step from
 ``--t-end / 32`` until the error is below 1e-12, stops falling, or the number of steps passes
 ``--max-steps`` (or, timed, a jaxrot run passes ``--time-cap``). ``--no-timing`` measures the
 errors only (the timing fields null, every ladder to its end): errors do not depend on the
@@ -96,20 +98,50 @@ def _orientations(data, joint):
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def mujoco_final(integrator, q, omega_body, dt, n_steps, joint="free"):
-    """MuJoCo's orientations after ``n_steps`` steps of ``dt`` (one model, ``mj_step``), or None where
-    the run went unstable: MuJoCo then warns (mjWARN_BADQACC) and resets the state to ``qpos0``, whose
-    identity orientations would pass for an answer ~π off."""
+def _one_body_states(single, q, omega_body):
+    """mjSTATE_FULLPHYSICS initial states ``(n, 14)`` of the one-body model ``single``, one per body."""
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(model_xml(len(q), integrator, dt, joint))
-    data = mujoco.MjData(model)
-    _set_state(model, data, q, omega_body, joint)
-    for _ in range(n_steps):
-        mujoco.mj_step(model, data)
-    if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+    data, spec = mujoco.MjData(single), mujoco.mjtState.mjSTATE_FULLPHYSICS
+    states = np.empty((len(q), mujoco.mj_stateSize(single, spec)))
+    for state, qi, wi in zip(states, q, omega_body, strict=True):
+        _set_state(single, data, qi[None], wi[None], "free")
+        mujoco.mj_getState(single, data, state, spec)
+    return states
+
+
+def _chunks(n_steps, size=64):
+    """Step counts of the rollout calls: ``mujoco.rollout`` records every state, so at most ``size``."""
+    return [size] * (n_steps // size) + ([n_steps % size] if n_steps % size else [])
+
+
+def _threaded(pool, single, datas, states, n_steps):
+    for k in _chunks(n_steps):
+        states = pool.rollout(single, datas, states, nstep=k)[0][:, -1]
+    return states
+
+
+def mujoco_final(integrator, q, omega_body, dt, n_steps):
+    """MuJoCo's orientations after ``n_steps`` steps of ``dt``, or None where a body went unstable.
+
+    One one-body rollout per body on a thread pool (the orbits are those of one model holding all
+    bodies to round-off: ``path_agreement_rad``; with 1000 bodies in one model the implicit
+    integrator costs ~70 µs per body-step, measured). An unstable body makes MuJoCo warn
+    (mjWARN_BADQACC) and reset it to ``qpos0`` and time 0, whose identity orientation would pass for
+    an answer ~π off: a final time short of ``n_steps·dt`` marks it.
+    """
+    import mujoco
+    from mujoco import rollout
+
+    single = mujoco.MjModel.from_xml_string(model_xml(1, integrator, dt))
+    nthread = os.cpu_count() or 1
+    with rollout.Rollout(nthread=nthread) as pool:
+        datas = [mujoco.MjData(single) for _ in range(nthread)]
+        final = _threaded(pool, single, datas, _one_body_states(single, q, omega_body), n_steps)
+    if np.any(np.abs(final[:, 0] - n_steps * dt) > 1e-6 * n_steps * dt):
         return None
-    return _orientations(data, joint)
+    q_end = final[:, 4:8]
+    return q_end / np.linalg.norm(q_end, axis=1, keepdims=True)
 
 
 def _median_seconds(run, repeats):
@@ -148,13 +180,11 @@ def mujoco_path_costs(q, omega_body, integrator, steps, repeats, joints, dt=1e-3
     _set_state(model, data, q, omega_body, "free")
     state0 = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, data, state0, spec)
-    chunks = [64] * (steps // 64) + ([steps % 64] if steps % 64 else [])
 
     def one_model_rollout():
         state = state0
-        for k in chunks:
-            states, _ = rollout.rollout(model, data, state, nstep=k)
-            state = states[0, -1]
+        for k in _chunks(steps):
+            state = rollout.rollout(model, data, state, nstep=k)[0][0, -1]
         return state
 
     costs["rollout"] = _median_seconds(one_model_rollout, repeats) / (n * steps)
@@ -162,28 +192,14 @@ def mujoco_path_costs(q, omega_body, integrator, steps, repeats, joints, dt=1e-3
     finals["rollout"] = q_rollout / np.linalg.norm(q_rollout, axis=1, keepdims=True)
     # n one-body rollouts on a thread pool.
     single = mujoco.MjModel.from_xml_string(model_xml(1, integrator, dt))
-    one = mujoco.MjData(single)
-    states0 = []
-    for qi, wi in zip(q, omega_body, strict=True):
-        _set_state(single, one, qi[None], wi[None], "free")
-        s = np.empty(mujoco.mj_stateSize(single, spec))
-        mujoco.mj_getState(single, one, s, spec)
-        states0.append(s)
-    states0 = np.array(states0)
+    states0 = _one_body_states(single, q, omega_body)
     nthread = os.cpu_count() or 1
     with rollout.Rollout(nthread=nthread) as pool:
         datas = [mujoco.MjData(single) for _ in range(nthread)]
-
-        def threaded():
-            state = states0
-            for k in chunks:
-                states, _ = pool.rollout(single, datas, state, nstep=k)
-                state = states[:, -1]
-            return state
-
-        costs["rollout_threads"] = _median_seconds(threaded, repeats) / (n * steps)
-        final = threaded()
-    q_threads = final[:, 4:8]
+        costs["rollout_threads"] = _median_seconds(
+            lambda: _threaded(pool, single, datas, states0, steps), repeats
+        ) / (n * steps)
+        q_threads = _threaded(pool, single, datas, states0, steps)[:, 4:8]
     finals["rollout_threads"] = q_threads / np.linalg.norm(q_threads, axis=1, keepdims=True)
     return costs, finals
 
@@ -279,7 +295,11 @@ def orders(rows):
     """Per method, the slope of log(error) against log(dt) over its rungs in (10·FLOOR, ASYMPTOTIC)."""
     out = {}
     for name in dict.fromkeys(r["method"] for r in rows):
-        mine = [r for r in rows if r["method"] == name and 10 * FLOOR < (r["error_rad"] or 1.0) < ASYMPTOTIC]
+        mine = [
+            r
+            for r in rows
+            if r["method"] == name and r["error_rad"] is not None and 10 * FLOOR < r["error_rad"] < ASYMPTOTIC
+        ]
         out[name] = (
             fit_order([r["dt"] for r in mine], [r["error_rad"] for r in mine]) if len(mine) >= 2 else None
         )
@@ -295,7 +315,10 @@ def budgets(rows):
             meeting = [
                 r
                 for r in rows
-                if r["side"] == side and (r["error_rad"] or 1e9) <= budget and r["us_per_body"]
+                if r["side"] == side
+                and r["error_rad"] is not None
+                and r["error_rad"] <= budget
+                and r["us_per_body"]
             ]
             best[side] = min(meeting, key=lambda r: r["us_per_body"]) if meeting else None
         m, j = best["mujoco"], best["jaxrot"]
@@ -349,7 +372,7 @@ def main(argv=None):
     parser.add_argument("--n", type=int, default=1000, help="bodies")
     parser.add_argument("--t-end", type=float, default=10.0)
     parser.add_argument("--max-steps", type=int, default=65536, help="the ladders' last rung at most")
-    parser.add_argument("--timing-steps", type=int, default=500, help="MuJoCo steps per timed run")
+    parser.add_argument("--timing-steps", type=int, default=200, help="MuJoCo steps per timed run")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--time-cap", type=float, default=5.0, help="s; a jaxrot run longer ends its ladder")
     parser.add_argument("--joints", default="free,ball", help="one_model joint kinds timed")
