@@ -22,7 +22,7 @@ ways to run it, each timed:
 A MuJoCo step costs the same at any step size (no contacts, no solver iterations), so each path is
 timed once (``--timing-steps`` steps, median of ``--repeats``) and its cost per body-step applies to
 every rung; the errors come from one untimed run per rung of one-body rollouts on a thread pool
-(the same orbits as one model's, bit for bit: ``path_agreement_rad``; one model of 1000 bodies costs
+(the same orbits as one model's to round-off: ``path_agreement_rad``; one model of 1000 bodies costs
 the implicit integrator tens of µs per body-step, seen on a loaded machine). jaxrot's side: every
 scheme in `jaxrot.SCHEMES` through `jaxrot.rollout`, each rung timed (the rotor schemes' cost
 depends on the step), compiled with `jaxrot.compiler_options`. Both ladders halve the step from
@@ -393,15 +393,24 @@ def main(argv=None):
     q_ref = jaxrot.analytic.free_top(state, jnp.asarray(MOMENTS), jnp.array([0.0, opts.t_end])).q[-1]
     rows = mujoco_rows(q, omega_body, q_ref, opts.t_end, opts.max_steps)
     paths, agreement = [], {}
-    for integrator in INTEGRATORS if timing else ():
+    for integrator in INTEGRATORS:
+        # Untimed, the paths still run once each: their orbits' agreement is recorded either way.
         costs, finals = mujoco_path_costs(
-            q, omega_body, integrator, opts.timing_steps, opts.repeats, opts.joints.split(",")
+            q,
+            omega_body,
+            integrator,
+            opts.timing_steps,
+            opts.repeats if timing else 1,
+            opts.joints.split(","),
         )
+        base = finals["one_model"]
+        agreement[integrator] = {p: max_angle(f, base) for p, f in finals.items() if p != "one_model"}
+        print(f"mujoco_{integrator:13s} paths against one_model: {agreement[integrator]}")
+        if not timing:
+            continue
         for path, seconds in costs.items():
             paths.append({"integrator": integrator, "path": path, "ns_per_body_step": 1e9 * seconds})
             print(f"mujoco_{integrator:13s} {path:16s} {1e9 * seconds:8.1f} ns per body-step")
-        base = finals["one_model"]
-        agreement[integrator] = {p: max_angle(f, base) for p, f in finals.items() if p != "one_model"}
         cheapest = min(
             (p for p in paths if p["integrator"] == integrator and p["path"] != "one_model_ball"),
             key=lambda p: p["ns_per_body_step"],
