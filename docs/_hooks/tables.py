@@ -535,7 +535,7 @@ def mujoco_free_body_accuracy(docs):
     data = _mujoco(docs)
     t_end = data["settings"]["t_end"]
     errors = {(r["method"], r["n_steps"]): r["error_rad"] for r in data["rows"]}
-    steps = [n for n in (32, 256, 2048, 16384) if any(k[1] == n for k in errors)]
+    steps = [n for n in (32, 256, 2048, 16384, 65536) if any(k[1] == n for k in errors)]
     methods = list(dict.fromkeys(r["method"] for r in data["rows"]))
     header = ["method", *[f"dt = {t_end / n:.3g}" for n in steps], "order"]
     rows = [
@@ -550,8 +550,8 @@ def mujoco_free_body_accuracy(docs):
     note = (
         "\n\nMaximum orientation error over the bodies at t = t_end [rad] against the exact free top; "
         "– where a ladder had stopped (its error at the 1e-12 floor or no longer falling) or not reached "
-        "that step; order: the slope of log error against log dt over the rungs between 1e-11 and 0.1 rad."
-    )
+        "that step; order: the slope of log error against log dt over the rungs between {:.0e} and {:g} rad."
+    ).format(*data["settings"]["order_fit_rad"])
     return (
         _table(header, rows)
         + note
