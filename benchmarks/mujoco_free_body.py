@@ -283,9 +283,7 @@ def jaxrot_rows(q, omega_body, q_ref, t_end, max_steps, repeats, timing, time_ca
                 row["ns_per_body_step"] = 1e9 * seconds / (len(q) * n_steps)
                 row["us_per_body"] = 1e6 * seconds / len(q)
             rows.append(row)
-            log(
-                f"{name:19s} {n_steps:7d} steps  error {error:.3e} rad  {row['ns_per_body_step'] or 0:.1f} ns"
-            )
+            log(f"{name:19s} {n_steps:7d} steps  error {error} rad  {row['ns_per_body_step'] or 0:.1f} ns")
             if _done(error, previous) or (timing and seconds > time_cap):
                 break
             previous = error
