@@ -15,7 +15,7 @@ The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machi
 made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
 ``benchmarks/gpu.sh``. The ``jax_md`` column of the throughput table needs
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
-left out. Run from the repository root with a clean checkout: a results file made from uncommitted
+left out. The ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the repository root with a clean checkout: a results file made from uncommitted
 package or benchmark code carries ``+dirty`` in its commit.
 """
 
@@ -127,6 +127,19 @@ JOBS = {
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
         3,
+    ),
+    # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the
+    # benchmark says so and writes nothing).
+    "mujoco_free_body": Job(
+        ("mujoco_free_body_cpu.json", "mujoco_free_body_cpu.png"),
+        (
+            "benchmarks/mujoco_free_body.py",
+            "--json",
+            "docs/mujoco_free_body_cpu.json",
+            "--png",
+            "docs/mujoco_free_body_cpu.png",
+        ),
+        15,
     ),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),

@@ -36,6 +36,7 @@ RESULTS = {
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),
     "rotor_choice_cpu.json": (None, "python benchmarks/regenerate.py --only rotor_choice"),
+    "mujoco_free_body_cpu.json": ("method", "python benchmarks/regenerate.py --only mujoco_free_body"),
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
     "race_cpu/race_float64.json": ("method", "python benchmarks/regenerate.py --only race64"),
     "race_cpu/race_float32.json": ("method", "python benchmarks/regenerate.py --only race32"),

@@ -521,6 +521,84 @@ def identify_speed_table(docs):
     return _table(header, rows) + summary + _provenance("identify_speed_cpu.json", data["machine"])
 
 
+def _mujoco(docs):
+    return _read(docs, "mujoco_free_body_cpu.json")
+
+
+def _mujoco_context(data):
+    s, m = data["settings"], data["machine"]
+    return f" ({s['n']} bodies, t = {s['t_end']:g}, MuJoCo {m.get('mujoco', '–')})"
+
+
+def mujoco_free_body_accuracy(docs):
+    """`benchmarks/mujoco_free_body.py`: each method's error at t_end at a few step sizes, and its order."""
+    data = _mujoco(docs)
+    t_end = data["settings"]["t_end"]
+    errors = {(r["method"], r["n_steps"]): r["error_rad"] for r in data["rows"]}
+    steps = [n for n in (32, 256, 2048, 16384, 65536) if any(k[1] == n for k in errors)]
+    methods = list(dict.fromkeys(r["method"] for r in data["rows"]))
+    header = ["method", *[f"dt = {t_end / n:.3g}" for n in steps], "order"]
+    rows = [
+        [f"`{m}`"]
+        + [
+            ("blew up" if errors[m, n] is None else _sig(errors[m, n], 2)) if (m, n) in errors else "–"
+            for n in steps
+        ]
+        + [_sig(data["orders"][m], 3) if data["orders"].get(m) is not None else "–"]
+        for m in methods
+    ]
+    note = (
+        "\n\nMaximum orientation error over the bodies at t = t_end [rad] against the exact free top; "
+        "– where a ladder had stopped (its error at the 1e-12 floor or no longer falling) or not reached "
+        "that step; order: the slope of log error against log dt over the rungs between {:.0e} and {:g} rad."
+    ).format(*data["settings"]["order_fit_rad"])
+    return (
+        _table(header, rows)
+        + note
+        + _provenance("mujoco_free_body_cpu.json", data["machine"], _mujoco_context(data))
+    )
+
+
+def mujoco_free_body_speed(docs):
+    """MuJoCo's cost per body-step on each path, and each budget's cheapest row of both sides."""
+    data = _mujoco(docs)
+    provenance = _provenance("mujoco_free_body_cpu.json", data["machine"], _mujoco_context(data))
+    if not data["settings"]["timed"]:
+        return (
+            "*Not timed yet: the results file holds the errors only, measured on a loaded machine (load "
+            "does not move an error). `python benchmarks/regenerate.py --only mujoco_free_body` on a quiet "
+            "machine adds the timings and these tables.*" + provenance
+        )
+    paths = list(dict.fromkeys(p["path"] for p in data["mujoco_paths"]))
+    cost = {(p["integrator"], p["path"]): p["ns_per_body_step"] for p in data["mujoco_paths"]}
+    integrators = list(dict.fromkeys(p["integrator"] for p in data["mujoco_paths"]))
+    path_rows = [
+        [f"`{i}`"] + [_sig(cost[i, p], 3) if (i, p) in cost else "–" for p in paths] for i in integrators
+    ]
+    path_table = _table(["MuJoCo [ns per body-step]", *[f"`{p}`" for p in paths]], path_rows)
+
+    def cell(r, side):
+        if r is None:
+            return "none"
+        where = f", `{r['path']}`" if side == "mujoco" else ""
+        return f"`{r['method']}`{where}, {r['n_steps']} steps: {_sig(r['us_per_body'], 3)} µs"
+
+    budget_rows = [
+        [
+            f"{b['budget_rad']:.0e}",
+            cell(b["mujoco"], "mujoco"),
+            cell(b["jaxrot"], "jaxrot"),
+            "–" if b["ratio"] is None else f"{b['ratio']:.1f}",
+        ]
+        for b in data["budgets"]
+    ]
+    budget_table = _table(
+        ["budget [rad]", "MuJoCo's cheapest (per body)", "jaxrot's cheapest (per body)", "MuJoCo / jaxrot"],
+        budget_rows,
+    )
+    return path_table + "\n\n" + budget_table + provenance
+
+
 def rotor_choice_table(docs, name="rotor_choice_cpu.json"):
     """The rotor's per-body step count against a fixed two at |ω|t = 0.3 (`benchmarks/rotor.py`, 2.)."""
     data = _read(docs, name)
@@ -800,6 +878,8 @@ TABLES = {
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
     "rotor_choice_table": rotor_choice_table,
+    "mujoco_free_body_accuracy": mujoco_free_body_accuracy,
+    "mujoco_free_body_speed": mujoco_free_body_speed,
     "throughput_peer_ratios": throughput_peer_ratios,
     "throughput_jax_versions": throughput_jax_versions,
     "ynn_trap_table": ynn_trap_table,

@@ -1,0 +1,463 @@
+"""MuJoCo 4.0 against jaxrot on the free body: error against cost per body, both measured in one process.
+
+The problem: ``--n`` bodies (default 1000) with principal moments I = (1, 2, 3), random
+orientations and random body-frame rates (each component normal, 1 rad/s), torque-free, to
+t = ``--t-end`` (10), float64. Torque-free because it is the motion MuJoCo's free joint models with
+nothing added (a torque model would be a callback or an actuator of MuJoCo's, whose cost would be
+measured instead of the integrators'), and its exact solution (`jaxrot.analytic.free_top`, elliptic
+functions) is the reference: the error of a row is the largest geodesic orientation error over the
+bodies at the final time.
+
+MuJoCo's side: its integrators Euler (semi-implicit), implicit, implicitfast and RK4, gravity,
+contacts and constraints off, each body on its own free joint (``qpos[3:7]`` its orientation,
+scalar first, body → world; ``qvel[3:6]`` its angular velocity in the **body** frame), and the
+ways to run it, each timed:
+
+- ``one_model``: one model holding all bodies, ``mj_step`` in a Python loop (the issue's cheapest);
+- ``rollout``: the same model through ``mujoco.rollout`` (the loop in C, the states recorded);
+- ``rollout_threads``: ``--n`` one-body rollouts of a one-body model, ``mujoco.rollout`` on a pool of
+  ``os.cpu_count()`` threads (MuJoCo's way to use every core);
+- ``--joints free,ball`` adds ``one_model`` with ball joints (rotation only, nothing translated).
+
+A MuJoCo step costs the same at any step size (no contacts, no solver iterations), so each path is
+timed once (``--timing-steps`` steps, median of ``--repeats``) and its cost per body-step applies to
+every rung; the errors come from one untimed run per rung of one-body rollouts on a thread pool
+(the same orbits as one model's to round-off: ``path_agreement_rad``; one model of 1000 bodies costs
+the implicit integrator tens of µs per body-step, seen on a loaded machine). jaxrot's side: every
+scheme in `jaxrot.SCHEMES` through `jaxrot.rollout`, each rung timed (the rotor schemes' cost
+depends on the step), compiled with `jaxrot.compiler_options`. Both ladders halve the step from
+``--t-end / 32`` until the error is below 1e-12, stops falling, or the number of steps passes
+``--max-steps`` (or, timed, a jaxrot run passes ``--time-cap``). ``--no-timing`` measures the
+errors only (the timing fields null, every ladder to its end): errors do not depend on the
+machine's load, timings do.
+
+    python benchmarks/mujoco_free_body.py --json docs/mujoco_free_body_cpu.json   # ~15 min, 2 cores
+    python benchmarks/mujoco_free_body.py --n 10 --t-end 1 --max-steps 1000 --timing-steps 50  # check
+
+Needs ``pip install -e ".[mujoco]"``; without MuJoCo it prints why and exits 0.
+"""
+
+import argparse
+import importlib.util
+import json
+import os
+import statistics
+import sys
+import time
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp
+import numpy as np
+
+import jaxrot
+from jaxrot import quaternion as quat
+from jaxrot.comparison import fit_order, machine_info, time_compiled
+
+
+MOMENTS = (1.0, 2.0, 3.0)
+INTEGRATORS = {"euler": "Euler", "implicit": "implicit", "implicitfast": "implicitfast", "rk4": "RK4"}
+BUDGETS = [10.0**-k for k in range(1, 11)]
+FLOOR = 1e-12  # below this the ladder stops: the reference and round-off
+ASYMPTOTIC = 0.5  # rad; orders are fitted on rungs between 10·FLOOR and this (first order: 0.4, 0.2, 0.1)
+STALL = 0.1  # rad; below this a rung that does not cut the error by 30 % ends its ladder
+
+
+def bodies(n, seed=0):
+    """``(q (n, 4), omega_body (n, 3))``: random orientations and body-frame rates."""
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True), rng.normal(size=(n, 3))
+
+
+def model_xml(n, integrator, dt, joint="free"):
+    """One MuJoCo model holding ``n`` bodies, each on its own joint, I = `MOMENTS`."""
+    moments = " ".join(map(repr, MOMENTS))
+    joint_xml = "<freejoint/>" if joint == "free" else '<joint type="ball"/>'
+    body = f'<body>{joint_xml}<inertial pos="0 0 0" mass="1" diaginertia="{moments}"/></body>'
+    return (
+        f'<mujoco><option timestep="{dt!r}" integrator="{INTEGRATORS[integrator]}" gravity="0 0 0">'
+        '<flag contact="disable" constraint="disable"/></option>'
+        f"<worldbody>{body * n}</worldbody></mujoco>"
+    )
+
+
+def _set_state(model, data, q, omega_body, joint):
+    mujoco = sys.modules["mujoco"]
+    mujoco.mj_resetData(model, data)
+    width_q, width_v = (7, 6) if joint == "free" else (4, 3)
+    data.qpos.reshape(-1, width_q)[:, width_q - 4 :] = q
+    data.qvel.reshape(-1, width_v)[:, width_v - 3 :] = omega_body
+
+
+def _orientations(data, joint):
+    width = 7 if joint == "free" else 4
+    q = data.qpos.reshape(-1, width)[:, width - 4 :]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _one_body_states(single, q, omega_body):
+    """mjSTATE_FULLPHYSICS initial states ``(n, 14)`` of the one-body model ``single``, one per body."""
+    import mujoco
+
+    data, spec = mujoco.MjData(single), mujoco.mjtState.mjSTATE_FULLPHYSICS
+    states = np.empty((len(q), mujoco.mj_stateSize(single, spec)))
+    for state, qi, wi in zip(states, q, omega_body, strict=True):
+        _set_state(single, data, qi[None], wi[None], "free")
+        mujoco.mj_getState(single, data, state, spec)
+    return states
+
+
+def _chunks(n_steps, size=64):
+    """Step counts of the rollout calls: ``mujoco.rollout`` records every state, so at most ``size``."""
+    return [size] * (n_steps // size) + ([n_steps % size] if n_steps % size else [])
+
+
+def _threaded(pool, single, datas, states, n_steps):
+    for k in _chunks(n_steps):
+        states = pool.rollout(single, datas, states, nstep=k)[0][:, -1]
+    return states
+
+
+def mujoco_final(integrator, q, omega_body, dt, n_steps):
+    """MuJoCo's orientations after ``n_steps`` steps of ``dt``, or None where a body went unstable.
+
+    One one-body rollout per body on a thread pool (the orbits are those of one model holding all
+    bodies to round-off: ``path_agreement_rad``; with 1000 bodies in one model the implicit
+    integrator costs ~70 µs per body-step, measured). An unstable body makes MuJoCo warn
+    (mjWARN_BADQACC) and reset it to ``qpos0`` and time 0, whose identity orientation would pass for
+    an answer ~π off: a final time short of ``n_steps·dt`` marks it.
+    """
+    import mujoco
+    from mujoco import rollout
+
+    single = mujoco.MjModel.from_xml_string(model_xml(1, integrator, dt))
+    nthread = os.cpu_count() or 1
+    with rollout.Rollout(nthread=nthread) as pool:
+        datas = [mujoco.MjData(single) for _ in range(nthread)]
+        final = _threaded(pool, single, datas, _one_body_states(single, q, omega_body), n_steps)
+    if np.any(np.abs(final[:, 0] - n_steps * dt) > 1e-6 * n_steps * dt):
+        return None
+    q_end = final[:, 4:8]
+    return q_end / np.linalg.norm(q_end, axis=1, keepdims=True)
+
+
+def _median_seconds(run, repeats):
+    run()  # warm: allocations, page faults
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        samples.append(time.perf_counter() - start)
+    return statistics.median(samples)
+
+
+def mujoco_path_costs(q, omega_body, integrator, steps, repeats, joints, dt=1e-3):
+    """Seconds per body-step of each way to run MuJoCo; and its paths' final q for a cross-check."""
+    import mujoco
+    from mujoco import rollout
+
+    n = len(q)
+    costs, finals = {}, {}
+    for joint in joints:
+        model = mujoco.MjModel.from_xml_string(model_xml(n, integrator, dt, joint))
+        data = mujoco.MjData(model)
+
+        def loop(model=model, data=data, joint=joint):
+            _set_state(model, data, q, omega_body, joint)
+            for _ in range(steps):
+                mujoco.mj_step(model, data)
+
+        name = "one_model" if joint == "free" else "one_model_ball"
+        costs[name] = _median_seconds(loop, repeats) / (n * steps)
+        finals[name] = _orientations(data, joint)
+    # mujoco.rollout on the one model; states recorded in chunks of at most 64 steps (memory).
+    model = mujoco.MjModel.from_xml_string(model_xml(n, integrator, dt))
+    data = mujoco.MjData(model)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    _set_state(model, data, q, omega_body, "free")
+    state0 = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state0, spec)
+
+    def one_model_rollout():
+        state = state0
+        for k in _chunks(steps):
+            state = rollout.rollout(model, data, state, nstep=k)[0][0, -1]
+        return state
+
+    costs["rollout"] = _median_seconds(one_model_rollout, repeats) / (n * steps)
+    q_rollout = one_model_rollout()[1 : 1 + 7 * n].reshape(n, 7)[:, 3:7]
+    finals["rollout"] = q_rollout / np.linalg.norm(q_rollout, axis=1, keepdims=True)
+    # n one-body rollouts on a thread pool.
+    single = mujoco.MjModel.from_xml_string(model_xml(1, integrator, dt))
+    states0 = _one_body_states(single, q, omega_body)
+    nthread = os.cpu_count() or 1
+    with rollout.Rollout(nthread=nthread) as pool:
+        datas = [mujoco.MjData(single) for _ in range(nthread)]
+        costs["rollout_threads"] = _median_seconds(
+            lambda: _threaded(pool, single, datas, states0, steps), repeats
+        ) / (n * steps)
+        q_threads = _threaded(pool, single, datas, states0, steps)[:, 4:8]
+    finals["rollout_threads"] = q_threads / np.linalg.norm(q_threads, axis=1, keepdims=True)
+    return costs, finals
+
+
+def max_angle(q, q_ref):
+    """The largest geodesic angle between two batches of orientations; None for a blown-up run."""
+    if q is None:
+        return None
+    error = float(jnp.max(quat.angle_between(jnp.asarray(q), jnp.asarray(q_ref))))
+    return error if np.isfinite(error) else None
+
+
+def ladder(max_steps, start=32):
+    """Step counts from ``start``, doubling, up to ``max_steps``."""
+    n_steps = start
+    while n_steps <= max_steps:
+        yield n_steps
+        n_steps *= 2
+
+
+def _done(error, previous):
+    """The ladder stops at the floor, or where the error stopped falling below the saturated range."""
+    return error is not None and (error < FLOOR or (error < STALL and error > 0.7 * previous))
+
+
+def mujoco_rows(q, omega_body, q_ref, t_end, max_steps, log=print):
+    rows = []
+    for integrator in INTEGRATORS:
+        previous = float("inf")
+        for n_steps in ladder(max_steps):
+            error = max_angle(mujoco_final(integrator, q, omega_body, t_end / n_steps, n_steps), q_ref)
+            rows.append(
+                {
+                    "side": "mujoco",
+                    "method": f"mujoco_{integrator}",
+                    "n_steps": n_steps,
+                    "dt": t_end / n_steps,
+                    "error_rad": error,
+                }
+            )
+            log(f"mujoco_{integrator:13s} {n_steps:7d} steps  error {error} rad")
+            if _done(error, previous):
+                break
+            previous = float("inf") if error is None else error
+    return rows
+
+
+def jaxrot_rows(q, omega_body, q_ref, t_end, max_steps, repeats, timing, time_cap, log=print):
+    q = jnp.asarray(q)
+    state = jaxrot.RotState(q, quat.rotate(q, jnp.asarray(omega_body)))
+    moments = jnp.asarray(MOMENTS)
+    rows = []
+    for name in jaxrot.SCHEMES:
+        previous = float("inf")
+        for n_steps in ladder(max_steps):
+
+            def run(state, name=name, n_steps=n_steps):
+                traj = jaxrot.rollout(name, state, moments, t_end / n_steps, n_steps, save_every=n_steps)
+                return traj.q[-1]
+
+            if timing:
+                q_end, compile_s, seconds = time_compiled(run, state, repeats, jaxrot.compiler_options())
+            else:
+                compiled = jax.jit(run, compiler_options=jaxrot.compiler_options()).lower(state).compile()
+                start = time.perf_counter()
+                q_end = jax.block_until_ready(compiled(state))
+                seconds, compile_s = time.perf_counter() - start, None
+            error = max_angle(q_end, q_ref)
+            row = {
+                "side": "jaxrot",
+                "method": name,
+                "n_steps": n_steps,
+                "dt": t_end / n_steps,
+                "error_rad": error,
+                "ns_per_body_step": None,
+                "us_per_body": None,
+                "compile_s": compile_s,
+            }
+            if timing:
+                row["ns_per_body_step"] = 1e9 * seconds / (len(q) * n_steps)
+                row["us_per_body"] = 1e6 * seconds / len(q)
+            rows.append(row)
+            log(f"{name:19s} {n_steps:7d} steps  error {error} rad  {row['ns_per_body_step'] or 0:.1f} ns")
+            if _done(error, previous) or (timing and seconds > time_cap):
+                break
+            previous = error
+    return rows
+
+
+def orders(rows):
+    """Per method, the slope of log(error) against log(dt) over its rungs in (10·FLOOR, ASYMPTOTIC)."""
+    out = {}
+    for name in dict.fromkeys(r["method"] for r in rows):
+        mine = [
+            r
+            for r in rows
+            if r["method"] == name and r["error_rad"] is not None and 10 * FLOOR < r["error_rad"] < ASYMPTOTIC
+        ]
+        out[name] = (
+            fit_order([r["dt"] for r in mine], [r["error_rad"] for r in mine]) if len(mine) >= 2 else None
+        )
+    return out
+
+
+def budgets(rows):
+    """For each budget, the cheapest row of each side meeting it (cost per body over the horizon)."""
+    out = []
+    for budget in BUDGETS:
+        best = {}
+        for side in ("mujoco", "jaxrot"):
+            meeting = [
+                r
+                for r in rows
+                if r["side"] == side
+                and r["error_rad"] is not None
+                and r["error_rad"] <= budget
+                and r["us_per_body"]
+            ]
+            best[side] = min(meeting, key=lambda r: r["us_per_body"]) if meeting else None
+        m, j = best["mujoco"], best["jaxrot"]
+        out.append(
+            {
+                "budget_rad": budget,
+                "mujoco": m and {k: m[k] for k in ("method", "path", "n_steps", "error_rad", "us_per_body")},
+                "jaxrot": j and {k: j[k] for k in ("method", "n_steps", "error_rad", "us_per_body")},
+                "ratio": m["us_per_body"] / j["us_per_body"] if m and j else None,
+            }
+        )
+    return out
+
+
+def plot(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    timed = any(r.get("us_per_body") for r in rows)
+    fig, axes = plt.subplots(
+        1, 2 if timed else 1, figsize=(12.5 if timed else 7, 4.2), constrained_layout=True
+    )
+    axes = np.atleast_1d(axes)
+    colours = iter(plt.get_cmap("tab20").colors)
+    for name in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == name]
+        style = dict(
+            marker="s" if mine[0]["side"] == "mujoco" else "o",
+            label=name,
+            color=next(colours),
+            linestyle="--" if mine[0]["side"] == "mujoco" else "-",
+        )
+        mine = [r for r in mine if r["error_rad"] is not None]  # blown-up rungs are left out
+        axes[0].loglog([r["dt"] for r in mine], [r["error_rad"] for r in mine], **style)
+        if timed:
+            axes[1].loglog([r["us_per_body"] for r in mine], [r["error_rad"] for r in mine], **style)
+    axes[0].set(xlabel="time step", ylabel="max orientation error at t_end [rad]")
+    if timed:
+        axes[1].set(xlabel="wall time per body over the horizon [µs]")
+        axes[1].legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8)
+    else:
+        axes[0].legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=1000, help="bodies")
+    parser.add_argument("--t-end", type=float, default=10.0)
+    parser.add_argument("--max-steps", type=int, default=65536, help="the ladders' last rung at most")
+    parser.add_argument("--timing-steps", type=int, default=200, help="MuJoCo steps per timed run")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--time-cap", type=float, default=5.0, help="s; a jaxrot run longer ends its ladder")
+    parser.add_argument("--joints", default="free,ball", help="one_model joint kinds timed")
+    parser.add_argument("--no-timing", action="store_true", help="errors only (timing fields null)")
+    parser.add_argument("--json", default=None)
+    parser.add_argument("--png", default=None, help="the work-precision figure")
+    opts = parser.parse_args(argv)
+    if importlib.util.find_spec("mujoco") is None:
+        print('mujoco_free_body: MuJoCo is not installed (pip install -e ".[mujoco]"); nothing measured')
+        return 0
+    import mujoco
+
+    timing = not opts.no_timing
+    info = machine_info() | {"mujoco": mujoco.__version__}
+    print(", ".join(f"{k} {v}" for k, v in info.items()))
+    q, omega_body = bodies(opts.n)
+    state = jaxrot.RotState(jnp.asarray(q), quat.rotate(jnp.asarray(q), jnp.asarray(omega_body)))
+    q_ref = jaxrot.analytic.free_top(state, jnp.asarray(MOMENTS), jnp.array([0.0, opts.t_end])).q[-1]
+    rows = mujoco_rows(q, omega_body, q_ref, opts.t_end, opts.max_steps)
+    paths, agreement = [], {}
+    for integrator in INTEGRATORS:
+        # Untimed, the paths still run once each: their orbits' agreement is recorded either way.
+        costs, finals = mujoco_path_costs(
+            q,
+            omega_body,
+            integrator,
+            opts.timing_steps,
+            opts.repeats if timing else 1,
+            opts.joints.split(","),
+        )
+        base = finals["one_model"]
+        agreement[integrator] = {p: max_angle(f, base) for p, f in finals.items() if p != "one_model"}
+        print(f"mujoco_{integrator:13s} paths against one_model: {agreement[integrator]}")
+        if not timing:
+            continue
+        for path, seconds in costs.items():
+            paths.append({"integrator": integrator, "path": path, "ns_per_body_step": 1e9 * seconds})
+            print(f"mujoco_{integrator:13s} {path:16s} {1e9 * seconds:8.1f} ns per body-step")
+        cheapest = min(
+            (p for p in paths if p["integrator"] == integrator and p["path"] != "one_model_ball"),
+            key=lambda p: p["ns_per_body_step"],
+        )
+        for r in rows:
+            if r["method"] == f"mujoco_{integrator}":
+                r.update(
+                    path=cheapest["path"],
+                    ns_per_body_step=cheapest["ns_per_body_step"],
+                    us_per_body=cheapest["ns_per_body_step"] * r["n_steps"] / 1e3,
+                )
+    for r in rows:
+        r.setdefault("path", None), r.setdefault("ns_per_body_step", None), r.setdefault("us_per_body", None)
+    rows += jaxrot_rows(q, omega_body, q_ref, opts.t_end, opts.max_steps, opts.repeats, timing, opts.time_cap)
+    result = {
+        "machine": info,
+        "settings": {
+            "n": opts.n,
+            "t_end": opts.t_end,
+            "moments": MOMENTS,
+            "omega_body_std": 1.0,
+            "max_steps": opts.max_steps,
+            "timing_steps": opts.timing_steps,
+            "repeats": opts.repeats,
+            "timed": timing,
+            "order_fit_rad": [10 * FLOOR, ASYMPTOTIC],
+            "threads": os.cpu_count(),
+        },
+        "mujoco_paths": paths,
+        "path_agreement_rad": agreement,
+        "orders": orders(rows),
+        "budgets": budgets(rows) if timing else [],
+        "rows": rows,
+    }
+    print("orders:", ", ".join(f"{k} {v:.2f}" for k, v in result["orders"].items() if v is not None))
+    for b in result["budgets"]:
+        m, j = b["mujoco"], b["jaxrot"]
+        print(
+            f"{b['budget_rad']:.0e}: mujoco {m and m['method']} {m and m['us_per_body']:.4g} µs, "
+            f"jaxrot {j and j['method']} {j and j['us_per_body']:.4g} µs, ratio {b['ratio']}"
+        )
+    if opts.json:
+        with open(opts.json, "w") as f:
+            json.dump(result, f, indent=1)
+    if opts.png:
+        plot(rows, opts.png)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""`_mujoco_sysid`: `mujoco.sysid` fitting the inertia to MuJoCo's own telemetry, as a user writes it.
+
+Skipped where ``mujoco[sysid]`` is not installed (``pip install -e ".[mujoco]"``). The fits are
+timed by the benchmark, never here.
+"""
+
+import numpy as np
+import pytest
+
+
+# All in the slow set: .ci/run installs MuJoCo for it (README's quick start does not), so these would
+# be skipped in CI's default run.
+pytestmark = pytest.mark.slow
+sysid = pytest.importorskip("mujoco.sysid")
+if not hasattr(sysid, "optimize"):
+    pytest.skip("mujoco.sysid without its extra: pip install 'mujoco[sysid]'", allow_module_level=True)
+
+import _mujoco_sysid as ms  # noqa: E402
+import _mujoco_telemetry as mt  # noqa: E402
+import mujoco  # noqa: E402
+
+
+def _residual_at_truth(manoeuvres):
+    problem = ms.sysid_problem(manoeuvres, inertia0=mt.INERTIA)
+    x = problem.params.as_vector()  # the start: the true inertia, and the first (noise-free) samples
+    residuals, _, _ = problem.residual_fn(x, problem.params)
+    return np.concatenate(residuals)
+
+
+def test_sysid_residual_vanishes_at_the_truth():
+    """At the true inertia and initial states sysid's prediction is MuJoCo's record: the controls held
+    per step, the prediction reaching the last sample, and each sample stamped as MuJoCo stamps its
+    rows (time + dt). Stamped at its own time instead, every sample is one step off."""
+    manoeuvres = mt.manoeuvres(duration=1.0)
+    residual = _residual_at_truth(manoeuvres)
+    assert residual.size == 3 * 101 * 7  # every sample of every sensor column
+    # Residuals are divided by each column's norm / √2 (~10 here); round-off of 1000 steps.
+    assert np.abs(residual).max() < 1e-11
+    unshifted = [m._replace(t=m.t - mt.TIMESTEP) for m in manoeuvres]
+    assert np.abs(_residual_at_truth(unshifted)).max() > 1e-6
+
+
+def test_sysids_pseudo_inertia_writer_does_not_compile_on_mujoco_4_0():
+    """The reason `_mujoco_sysid` writes ``fullinertia`` itself: sysid's ``InertiaType.Pseudo``
+    modifier sets ``iquat`` to NaN, which MuJoCo 4.0.0's compiler rejects. If this fails, sysid's own
+    writer works: use it in `_mujoco_sysid.sysid_problem`."""
+    spec = mujoco.MjSpec.from_string(mt.model_xml())
+    param = sysid.body_inertia_param(spec, spec.compile(), "body", sysid.InertiaType.Pseudo)
+    params = sysid.ParameterDict()
+    params.add(param)
+    with pytest.raises(ValueError, match="mass and inertia of moving bodies"):
+        sysid.apply_param_modifiers(params, spec)
+
+
+def test_sysid_recovers_the_inertia_from_noise_free_data():
+    """From a sphere (0.045 kg m²) and the first samples, three 2 s manoeuvres: the tensor MuJoCo
+    integrated, to the finite-difference Jacobian's reach (measured 1.6e-12 relative)."""
+    manoeuvres = mt.manoeuvres(duration=2.0)
+    fit = ms.sysid_fit(manoeuvres)
+    truth = mt.true_inertia()
+    assert np.abs(fit.inertia - truth).max() < 1e-8 * np.abs(truth).max()
+    for q0, omega0, m in zip(fit.q0, fit.omega_body0, manoeuvres, strict=True):
+        np.testing.assert_allclose(q0, m.q0, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(omega0, m.omega_body0, rtol=0, atol=1e-9)
+    assert len(fit.names) == 6 + 3 * 6 and fit.covariance.shape == (24, 24) and fit.wall_s > 0
+
+
+def test_sysid_noisy_fit_is_within_its_standard_errors():
+    """One noise seed, three 5 s manoeuvres: every inertia element within 4.5 of sysid's standard
+    errors (delta method on its covariance; p < 1e-4 per element if they were calibrated), and the
+    95 % half-widths sysid reports are 1.96 of its standard errors (a t quantile at ~9000 dof)."""
+    fit = ms.sysid_fit(mt.manoeuvres(duration=5.0, noise_seed=11))
+    z = (fit.inertia - mt.true_inertia()) / fit.inertia_stderr
+    assert np.abs(z).max() < 4.5, z
+    stderr = np.sqrt(np.diag(fit.covariance))
+    np.testing.assert_allclose(fit.halfwidth95, 1.96 * stderr, rtol=1e-3)
