@@ -18,7 +18,19 @@ all fits alike);
 "same fit quality" is checked as the largest difference of the inertia and dipole between the two
 fits in units of jaxrot's standard errors, and the final losses.
 
-    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores
+Then MuJoCo 4.0's `mujoco.sysid` on data MuJoCo made (`tests/_mujoco_telemetry.py`: a free body
+with a full inertia tensor, three 10 s manoeuvres under body-frame motor torques held for each
+1 ms step, orientation and gyro at 100 Hz, σ = 1e-4 rad and rad/s), as a user writes it
+(`tests/_mujoco_sysid.py`): fitting each manoeuvre's initial state too (a custom rollout), and
+with sysid's default initial state (the first samples). jaxrot fits the same data with the
+controls as MuJoCo applies them (``control_frame="body"``, ``control_hold="previous"``). Both
+start from the same sphere (0.045 kg m²) and the first samples; for each of ``--mujoco-seeds``
+noise seeds every fit runs once, round-robin; the rows give the median wall time (jaxrot's
+compiled, and its first call), the median relative error ‖I − I_true‖_F / ‖I_true‖_F, and how
+often the 95 % intervals of the six inertia elements hold the truth. Skipped with a message where
+``mujoco[sysid]`` is not installed (``pip install -e ".[mujoco]"``).
+
+    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo
     python benchmarks/identify_speed.py --json docs/identify_speed_cpu.json  # the file the docs render
 """
 
@@ -138,9 +150,93 @@ def residuals(p, args):
     return jnp.where(jnp.isnan(r_q), 0.0, r_q), r_w
 
 
+Z95 = 1.959963984540054
+
+
+def mujoco_rows(n_seeds):
+    """The jaxrot / mujoco.sysid comparison on MuJoCo's data (module docstring), or None without MuJoCo."""
+    try:
+        import _mujoco_sysid as ms
+        import _mujoco_telemetry as mt
+        from mujoco import sysid
+
+        if not hasattr(sysid, "optimize"):
+            raise ImportError("mujoco.sysid without its extra")
+    except ImportError as error:
+        print(f"\nmujoco.sysid rows skipped ({error}): pip install -e '.[mujoco]'")
+        return None
+    truth = mt.true_inertia()
+    upper = np.triu_indices(3)
+
+    def jaxrot_fit(manoeuvres):
+        experiments = [
+            jaxrot.Experiment(
+                m.t, q=m.q, omega_body=m.omega_body, sigma_q=m.sigma_q, sigma_omega=m.sigma_omega,
+                control=(m.t_c, m.tau_c), control_frame="body", control_hold="previous",
+            )
+            for m in manoeuvres
+        ]  # fmt: skip
+        q0 = np.stack([m.q[0] for m in manoeuvres])
+        omega0 = np.asarray(
+            quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
+        )
+        fit = jaxrot.identify(experiments, inertia0=ms.INERTIA0, q0=q0, omega0=omega0)
+        return np.asarray(fit.inertia), fit.stderr.inertia
+
+    def sysid_fit(manoeuvres, fit_initial_state):
+        fit = ms.sysid_fit(manoeuvres, fit_initial_state=fit_initial_state)
+        return fit.inertia, fit.inertia_stderr
+
+    fits = {
+        "jaxrot.identify (controls held in the body frame)": jaxrot_fit,
+        "mujoco.sysid, fitting the initial state too (a custom rollout)": lambda m: sysid_fit(m, True),
+        "mujoco.sysid, initial state from the first samples (its default)": lambda m: sysid_fit(m, False),
+    }
+    first = time.perf_counter()
+    jax.block_until_ready(jaxrot_fit(mt.manoeuvres(noise_seed=0)))
+    first = time.perf_counter() - first
+    results = {label: [] for label in fits}
+    for seed in range(n_seeds):
+        manoeuvres = mt.manoeuvres(noise_seed=seed)
+        for label, fit in fits.items():
+            t0 = time.perf_counter()
+            inertia, se = jax.block_until_ready(fit(manoeuvres))
+            seconds = time.perf_counter() - t0
+            error = float(np.linalg.norm(inertia - truth) / np.linalg.norm(truth))
+            inside = np.abs(inertia - truth)[upper] <= Z95 * se[upper]
+            results[label].append((seconds, error, inside))
+            print(f"  seed {seed}: {label}: {seconds:.2f} s, error {error:.2e}, {inside.sum()}/6 inside")
+    rows = []
+    for label, runs in results.items():
+        rows.append(
+            {
+                "fit": label,
+                "median_s": statistics.median(r[0] for r in runs),
+                "first_call_s": first if label.startswith("jaxrot") else None,
+                "relative_error": statistics.median(r[1] for r in runs),
+                "coverage95": float(np.mean([r[2] for r in runs])),
+                "seeds": n_seeds,
+            }
+        )
+    print("\n| fit | median wall time [s] | relative error | 95 % interval coverage |")
+    print("|---|---|---|---|")
+    for row in rows:
+        cells = [
+            row["fit"],
+            f"{row['median_s']:.2f}",
+            f"{row['relative_error']:.1e}",
+            f"{row['coverage95']:.2f}",
+        ]
+        print("| " + " | ".join(cells) + " |")
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", default=None, help="also write the rows here")
+    parser.add_argument(
+        "--mujoco-seeds", type=int, default=4, help="noise seeds of the MuJoCo comparison (0: skip)"
+    )
     opts = parser.parse_args(argv)
     info = machine_info()
     print(info)
@@ -256,10 +352,14 @@ def main(argv=None):
     print(f"\nFastest diffrax + optimistix fit within 0.1 se of jaxrot's: {best[0]}")
     print(f"  compiled {best[2]:.2f} s against jaxrot's {run:.2f} s: jaxrot {best[2] / run:.1f}× faster")
     print(f"  first call {best[1]:.1f} s against jaxrot's {first:.1f} s: {best[1] / first:.2f}×")
+    mujoco = mujoco_rows(opts.mujoco_seeds) if opts.mujoco_seeds else None
     if opts.json:
         keys = ("fit", "first_call_s", "compiled_s", "loss", "max_gap_se", "model_error_rad")
+        out = {"machine": info, "rows": [dict(zip(keys, r, strict=True)) for r in rows]}
+        if mujoco is not None:
+            out["mujoco"] = mujoco
         with open(opts.json, "w") as f:
-            json.dump({"machine": info, "rows": [dict(zip(keys, r, strict=True)) for r in rows]}, f, indent=2)
+            json.dump(out, f, indent=2)
 
 
 if __name__ == "__main__":
