@@ -51,7 +51,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
-from .._fluid._flow import flow_rotation
+from .._fluid._flow import body_flow
+from .._fusion import stage
 from .._inertia import body_inertia
 from .._state import RotState
 from ._base import AbstractScheme, world_torque
@@ -264,39 +265,44 @@ class AbstractExponentialLieRK(AbstractScheme):
                 part = _sum(weights, values)
                 if part is not None:
                     theta = theta + scale * part
-            rotation, chart_scalar = chart(theta)
-            q_i = quat.multiply(q0, rotation)
+            # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes earlier stages in later ones.
+            theta, deviation = stage(theta, deviation)
+            rotation, chart_scalar = stage(*chart(theta))
+            q_i = stage(quat.multiply(q0, rotation))
             last = i == len(rows) - 1
             if last:
                 q_i = quat.normalize(q_i)
-            slow, forcing, u = evaluate(t + node * h, q_i, deviation)
+            slow, forcing, u = stage(*evaluate(t + node * h, q_i, deviation))
             if last:
                 return q_i, u, slow, forcing
             forcings.append(forcing)
             # Right-trivialised: Θ̇ = dψ⁻¹_{−Θ}(u) for q = q_n ⊗ ψ(Θ).
-            rotation_terms.append(inverse_differential(-theta, chart_scalar, u) - deviation)
+            rotation_terms.append(stage(inverse_differential(-theta, chart_scalar, u) - deviation))
 
     def _evaluate(self, t, q, inertia, torque, args, fluid, *, deviation=None, velocity=None):
         """``(S, N, u)`` of equation (1) at ``(t, q)`` and ``u = S + deviation`` (or ``velocity``)."""
         dtype = q.dtype
         force = torque is not None and uses_omega(torque, t, q, jnp.zeros(3, dtype), args)
         folded = torque is not None and not force
-        gradient, bretherton = fluid.velocity_gradient, fluid.bretherton
+        flowing = fluid.velocity_gradient is not None
 
-        def slow_velocity(t, q):
-            target = quat.rotate(quat.conjugate(q), flow_rotation(q, gradient, bretherton))
-            if folded:
-                tau = world_torque(torque, t, q, jnp.zeros(3, dtype), args)
-                target = target + quat.rotate(quat.conjugate(q), tau) / fluid.friction
-            return target
+        def torque_velocity(t, q):  # ζ⁻¹ ⊙ τ_b: the part of S an ω-independent torque gives
+            tau = world_torque(torque, t, q, jnp.zeros(3, dtype), args)
+            return quat.rotate(quat.conjugate(q), tau) / fluid.friction
 
-        moving = gradient is not None or folded
-        slow = slow_velocity(t, q) if moving else jnp.zeros(3, dtype)
+        slow = jnp.zeros(3, dtype)
+        if folded:
+            slow = slow + torque_velocity(t, q)
+        if flowing:
+            flow, flow_rate = body_flow(q, fluid.velocity_gradient, fluid.bretherton)
+            slow = slow + flow
         u = slow + deviation if velocity is None else velocity
         forcing = -inertia.solve(jnp.cross(u, inertia.apply(u)))
-        if moving:
+        if flowing:
+            forcing = forcing - flow_rate(u)
+        if folded:
             q_dot = 0.5 * quat.multiply(q, quat.pure(u))
-            forcing = forcing - jax.jvp(slow_velocity, (t, q), (jnp.ones((), jnp.result_type(t)), q_dot))[1]
+            forcing = forcing - jax.jvp(torque_velocity, (t, q), (jnp.ones((), jnp.result_type(t)), q_dot))[1]
         if force:
             tau = world_torque(torque, t, q, quat.rotate(q, u), args)
             forcing = forcing + inertia.solve(quat.rotate(quat.conjugate(q), tau))
