@@ -848,8 +848,16 @@ def fluid_race_notes(docs, name="fluid_race_cpu.json"):
     return "\n".join(lines)
 
 
+def fluid_race_figure(docs, name="fluid_race_cpu.png"):
+    """The race's figure, once the benchmark has drawn it (a missing image would fail the strict build)."""
+    if not (docs / name).exists():
+        return ""
+    return f"![Error against wall time, one panel per Stokes number]({name})"
+
+
 TABLES = {
     "fluid_orders_table": fluid_orders_table,
+    "fluid_race_figure": fluid_race_figure,
     "fluid_race_table": fluid_race_table,
     "fluid_race_notes": fluid_race_notes,
     "throughput_table": throughput_table,
