@@ -378,7 +378,8 @@ def test_fluid_rollouts_per_body_and_in_chunks():
 @pytest.mark.slow
 def test_gradients_through_a_fluid_rollout_match_central_differences():
     """d(final axis)/d(viscosity) through ExpMidpoint at ζΔt/I ≈ 1.7: under jit, against a central
-    difference of step 1e-5 (truncation ~1e-10, round-off ~1e-11)."""
+    difference of step 1e-5 (truncation ~1e-10, round-off ~1e-11); and jit(vmap) over viscosities
+    (traced fluids) gives the eager runs."""
 
     def final_axis(viscosity):
         fl = jaxrot.Fluid.spheroid(4.0, 1.0, viscosity, velocity_gradient=SHEAR)
@@ -389,6 +390,8 @@ def test_gradients_through_a_fluid_rollout_match_central_differences():
     gradient = jax.jit(jax.grad(final_axis))(2.0)
     central = (final_axis(2.0 + 1e-5) - final_axis(2.0 - 1e-5)) / 2e-5
     assert float(gradient) == pytest.approx(float(central), rel=1e-6, abs=1e-9)
+    batched = jax.jit(jax.vmap(final_axis))(jnp.array([2.0 - 1e-5, 2.0 + 1e-5]))  # traced fluids
+    np.testing.assert_allclose(batched, [final_axis(2.0 - 1e-5), final_axis(2.0 + 1e-5)], atol=1e-14)
 
 
 # --- a literature check with inertia ---------------------------------------------------------------

@@ -10,8 +10,9 @@ depend on ω. With ``L = ζ/I`` (principal moments: diagonal) and the deviation 
 
     v̇ = −L v + N(t, q, u),   N = I⁻¹(τ_b,ω-dependent − u × I u) − Ṡ,          (1)
 
-and the only large term, ``−L v``, is linear: ``Ṡ`` (a `jax.jvp` of ``S`` along ``q̇``) and the
-gyroscopic term stay bounded as ``L → ∞``. The rotation vector ``Θ`` of ``q = q_n ⊗ exp(Θ)``
+and the only large term, ``−L v``, is linear: ``Ṡ`` (the flow's part written out,
+`jaxrot._fluid._flow.body_flow`; the torque's part a `jax.jvp` along ``q̇``) and the gyroscopic term
+stay bounded as ``L → ∞``. The rotation vector ``Θ`` of ``q = q_n ⊗ exp(Θ)``
 obeys ``Θ̇ = v + [S + dexp⁻¹_{−Θ}(u) − u]``: the pair ``(v, Θ)`` is a semilinear system with the
 linear part ``[[−L, 0], [1, 0]]`` and a bounded, smooth nonlinear part. An explicit exponential
 Runge–Kutta method (Hochbruck & Ostermann, SIAM J. Numer. Anal. 43, 1069 (2005); Acta Numerica
