@@ -181,6 +181,15 @@ def test_bad_fluid_rollouts_are_value_errors_before_compiling():
         jaxrot.rollout("exp_rk4", state, jnp.ones(3), 0.1, 2, fluid=warm)
     with pytest.raises(ValueError, match="`fluid.kT` > 0 .* needs a PRNG `key`"):
         jaxrot.overdamped_rollout(state.q, warm, 0.1, 2)
+
+    def traced(kT):
+        fluid = jaxrot.Fluid(jnp.ones(3), kT=kT)
+        return jaxrot.rollout("exp_midpoint", state, jnp.ones(3), 0.1, 2, fluid=fluid).q
+
+    # Under jit the check runs with the program (eqx.error_if: JaxRuntimeError, or a ValueError from
+    # a host callback in pytest-xdist workers, as tests/test_validation.py notes).
+    with pytest.raises((jax.errors.JaxRuntimeError, ValueError), match="(?s)`fluid.kT` > 0 .* needs a PRNG"):
+        jax.block_until_ready(jax.jit(traced)(1.0))
     with pytest.raises(NotImplementedError, match="Thermal"):
         jaxrot.rollout("exp_rk4", state, jnp.ones(3), 0.1, 2, fluid=warm, key=jax.random.key(0))
     with pytest.raises(ValueError, match=r"`fluid.friction` has shape \(3, 3\)"):

@@ -203,14 +203,16 @@ def check_fluid(fluid, batch_shape, dtype, key=None):
                 f"the particle axes {batch_shape} in front for one value per body."
             )
     kT = values["kT"]
-    if key is None:
-        values["kT"] = check_values(
-            kT,
-            kT > 0,
+    if key is None and (is_concrete(kT) or axes["kT"] is None):
+        # Attached to the friction, which every step reads (an unused kT's check would be dropped
+        # under jit); a traced per-body kT is not checked: that would be a reduction over all bodies.
+        values["friction"] = check_values(
+            values["friction"],
+            jnp.any(kT > 0),
             "`fluid.kT` > 0 (a fluid at a temperature) needs a PRNG `key`, e.g. key=jax.random.key(0): "
             "the thermal torque is random. Pass kT=0 for a deterministic run.",
         )
-    elif is_concrete(kT) and np.any(np.asarray(kT) > 0):
+    elif key is not None and is_concrete(kT) and np.any(np.asarray(kT) > 0):
         raise NotImplementedError("Thermal fluids (kT > 0) are not implemented yet; pass kT=0.")
     treedef = jax.tree_util.tree_structure(jax.tree_util.tree_map(_unwrap, fluid, is_leaf=is_per_body))
     present = [name for name in _BODY_SHAPES if values[name] is not None]
