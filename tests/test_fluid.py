@@ -213,8 +213,9 @@ def test_every_explicit_scheme_refuses_a_fluid_naming_those_that_take_it(name):
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
 def test_a_sphere_turns_with_the_fluid_overdamped(dtype):
-    """ω = Ω exactly, and after n steps q = exp(n Ω Δt) ⊗ q0 to round-off: the rotation is about a
-    fixed axis, which the stages reproduce exactly; the error grows like n · eps (a few ulp per step)."""
+    """ω = Ω exactly, and after n steps q = exp(n Ω Δt) ⊗ q0 to round-off with the default scheme
+    (RKMK4 in exponential coordinates: at a constant ω every stage slope is ω, so each step is the
+    exact rotation); the error grows like n · eps (a few ulp per step)."""
     fluid = jaxrot.Fluid.spheroid(1.0, 1.0, 1.0, velocity_gradient=SHEAR.astype(dtype))
     q0 = Q0.astype(dtype)
     n = 200

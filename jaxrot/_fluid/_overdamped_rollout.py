@@ -64,7 +64,8 @@ def overdamped_rollout(
             ``fluid.friction`` instead.
         args: the torque's parameters (`jaxrot.per_body` leaves: one per body).
         scheme: None (``"rkmk4"``, order 4), ``"lie_euler"`` (1), ``"lie_midpoint"`` (2), or a scheme
-            instance, e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="exp")``.
+            instance, e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")`` (half the
+            operations a step, not exact at a constant angular velocity).
         save_every: save every ``save_every`` steps (it must divide ``n_steps``); t0: initial time.
         key: a JAX PRNG key, required when ``fluid.kT > 0`` (thermal rotation); unused otherwise.
 
