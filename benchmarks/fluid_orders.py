@@ -112,7 +112,10 @@ def fluid_row(name, stokes, with_magnet, levels):
         "scheme": name,
         "stokes": stokes,
         "torque": "magnet" if with_magnet else "none",
-        "zeta_dt_over_inertia": [float(rates.min() * T_END / steps[-1]), float(rates.max() * T_END / steps[0])],
+        "zeta_dt_over_inertia": [
+            float(rates.min() * T_END / steps[-1]),
+            float(rates.max() * T_END / steps[0]),
+        ],
         "steps": steps,
         "errors": errors,
         "order": fit(steps, errors, T_END),
@@ -127,7 +130,13 @@ def frictionless_row(name, levels):
     scene = jaxrot.SCENES["heavy_top"]()
     run = runner(jaxrot.FLUID_SCHEMES[name], scene.inertia, scene.torque, scene.args, None)
     reference = jaxrot.reference_rollout(
-        scene.state, scene.inertia, jnp.array([0.0, 1.0]), torque=scene.torque, args=scene.args, rtol=1e-13, atol=1e-13
+        scene.state,
+        scene.inertia,
+        jnp.array([0.0, 1.0]),
+        torque=scene.torque,
+        args=scene.args,
+        rtol=1e-13,
+        atol=1e-13,
     ).q[-1]
     first = 16 if jaxrot.FLUID_SCHEMES[name].order >= 4 else 32
     steps = [first * 2**k for k in range(levels)]
@@ -170,7 +179,9 @@ def table(rows):
         span = "—" if zeta is None else f"{zeta[0]:.2g}…{zeta[1]:.2g}"
         stokes = "—" if r["stokes"] is None else f"{r['stokes']:.0e}"
         local = " ".join(f"{x:.2f}" for x in r["local_orders"])
-        lines.append(f"{r['scheme']:<22} {stokes:>7} {r['torque']:<20} {span:>19} {r['order']:>6.2f}  {local}")
+        lines.append(
+            f"{r['scheme']:<22} {stokes:>7} {r['torque']:<20} {span:>19} {r['order']:>6.2f}  {local}"
+        )
     return "\n".join(lines)
 
 

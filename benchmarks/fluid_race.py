@@ -9,7 +9,7 @@ The Stokes number St = I_⊥ γ̇ / ζ_⊥ sets the friction's stiffness: ζΔt/
 - jaxrot, inertial: ``exp_rk4`` and ``exp_midpoint`` with ``fluid=`` (step ladders as in
   ``benchmarks/race.py``); at St = 1e-1 also ``rkmk_dopri8`` with the fluid's torque as a plain
   callable, which is stable while ζΔt/I < ~2.5 (its ladder starts inside that);
-- jaxrot, overdamped: `jaxrot.overdamped_rollout`'s ``rkmk4`` (Cayley chart) and ``lie_midpoint``:
+- jaxrot, overdamped: `jaxrot.overdamped_rollout`'s ``rkmk4`` and ``lie_midpoint``:
   no inertia, so their error against the inertial reference stops at the model's own, of order St;
   the table says below which budget that disqualifies them;
 - diffrax, as a user would write it: the Euclidean quaternion ODE of `jaxrot.reference_rollout`
@@ -160,9 +160,7 @@ def race_one(stokes, n, repeats, time_cap, floor, max_steps, quick, log):
             max_steps=10**7,
         ).q[-1]
         check = error_of(dopri, q_ref[:16])
-        log(
-            f"  reference: ExpRK4, {ref_steps} steps; Dopri8 (1e-13) differs by {check:.2e} rad on 16 bodies"
-        )
+        log(f"  reference: ExpRK4, {ref_steps} steps; Dopri8 (1e-13) differs by {check:.2e} rad on 16 bodies")
     rows = []
     common = {"stokes": stokes, "particles": n}
 
