@@ -146,6 +146,9 @@ JOBS = {
         ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
         1.5,
     ),
+    # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
+    "fluid_orders": Job(("fluid_orders.json",), ("benchmarks/fluid_orders.py",), 12),
+    "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 40, True),
 }
 
 

@@ -28,6 +28,9 @@ from ._fit import (
     fit_inertia as fit_inertia,
     identify as identify,
 )
+from ._fluid._fluid import Fluid as Fluid
+from ._fluid._overdamped import OVERDAMPED_SCHEMES as OVERDAMPED_SCHEMES
+from ._fluid._overdamped_rollout import overdamped_rollout as overdamped_rollout
 from ._inertia import (
     BodyInertia as BodyInertia,
     MathematicalBody as MathematicalBody,
@@ -45,7 +48,7 @@ from ._integrate._runtime_check import IntegrationError as IntegrationError
 from ._particles import per_body as per_body
 from ._state import RotState as RotState, Trajectory as Trajectory
 from .scenes import SCENES as SCENES, Scene as Scene
-from .schemes import SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
+from .schemes import FLUID_SCHEMES as FLUID_SCHEMES, SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
 
 
 __version__ = importlib.metadata.version("jaxrot")

@@ -42,7 +42,8 @@ def main(argv=None) -> int:
     cmp.add_argument(
         "--solvers",
         default=None,
-        help="subset of diffrax_tsit5,diffrax_dopri5,diffrax_dopri8, or none (default: all)",
+        help="subset of diffrax_tsit5,diffrax_dopri5,diffrax_dopri8 (and diffrax_kvaerno5 in a fluid), "
+        "or none (default: all)",
     )
     cmp.add_argument(
         "--tolerances",
@@ -61,14 +62,17 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    if ns.list_scenes:
-        from .scenes import SCENES
+    from .scenes import FLUID_SCENES, SCENES
 
-        for name, factory in SCENES.items():
+    if ns.list_scenes:
+        for name, factory in {**SCENES, **FLUID_SCENES}.items():
             scene = factory()
-            print(f"{name:<22} {scene.n_bodies:>4} bodies  {scene.description}")
+            print(f"{name:<26} {scene.n_bodies:>4} bodies  {scene.description}")
         return 0
     from .comparison import compare, format_table, machine_info, write_outputs
+
+    if ns.scene in FLUID_SCENES:  # its own rows: the fluid schemes, the overdamped ones, Kvaerno5
+        from ._fluid._compare import compare_fluid as compare
 
     start = time.perf_counter()
     try:
@@ -87,10 +91,13 @@ def main(argv=None) -> int:
     except ValueError as err:
         parser.error(str(err))
     info = machine_info()
-    print(
-        f"jaxrot compare — scene {ns.scene}; {ns.dtype}; {rows[0]['particles']} particles; "
-        "reference diffrax Dopri8 rtol=atol=1e-13 in float64"
+    reference = (
+        "a fine float64 run of exp_rk4 (or of the overdamped rkmk4)"
+        if ns.scene in FLUID_SCENES
+        else "diffrax Dopri8 rtol=atol=1e-13 in float64"
     )
+    particles = rows[0]["particles"]
+    print(f"jaxrot compare — scene {ns.scene}; {ns.dtype}; {particles} particles; reference {reference}")
     print(", ".join(f"{k} {v}" for k, v in info.items()))
     written = write_outputs(rows, ns.out, plot=not ns.no_plot)  # first: a long run is never lost
     print(format_table(rows))

@@ -474,13 +474,18 @@ def budget_table(rows, budgets=None) -> list:
     `recommend` over all rows unless ``budgets`` are given.
     """
     budgets = [b for b, _ in recommend(rows, budgets)]
-    ours = recommend([r for r in rows if r["method"] not in ADAPTIVE_SOLVERS], budgets)
-    theirs = recommend([r for r in rows if r["method"] in ADAPTIVE_SOLVERS], budgets)
+    ours = recommend([r for r in rows if not _is_diffrax(r)], budgets)
+    theirs = recommend([r for r in rows if _is_diffrax(r)], budgets)
     table = []
     for (budget, mine), (_, best) in zip(ours, theirs, strict=True):
         ratio = best["us_per_particle_run"] / mine["us_per_particle_run"] if mine and best else None
         table.append((budget, mine, best, ratio))
     return table
+
+
+def _is_diffrax(row) -> bool:
+    """A diffrax solver's row (the ``diffrax_…`` methods: `ADAPTIVE_SOLVERS`, and Kvaerno5 in a fluid)."""
+    return row["method"] in ADAPTIVE_SOLVERS or row["method"].startswith("diffrax_")
 
 
 def format_budget_table(rows) -> str:
@@ -526,9 +531,10 @@ def format_table(rows) -> str:
             if order is None
             else f"{order:.3f}"
         )
-        lines.append(f"measured order ({name}): {fitted} (nominal {SCHEMES[name].order})")
+        nominal = next(r["order"] for r in rows if r["method"] == name)
+        lines.append(f"measured order ({name}): {fitted} (nominal {nominal})")
     lines.append(format_recommendation(rows))
-    if any(r["method"] in ADAPTIVE_SOLVERS for r in rows) and any(r["method"] in SCHEMES for r in rows):
+    if any(_is_diffrax(r) for r in rows) and not all(_is_diffrax(r) for r in rows):
         lines += ["", format_budget_table(rows)]
     return "\n".join(lines)
 

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import quaternion as quat
+from ._fluid._fluid import Fluid
 from ._particles import per_body
 from ._state import RotState
 from .diagnostics import kinetic_energy
@@ -47,6 +48,8 @@ class Scene(NamedTuple):
             over the horizon at this step.
         t_end: the horizon (s).
         drive: a `jaxrot.Drive`, or None.
+        fluid: a `jaxrot.Fluid` the bodies turn in (`FLUID_SCENES`), or None. With a fluid and
+            ``inertia=None`` the scene is overdamped: `jaxrot.overdamped_rollout` integrates it.
     """
 
     name: str
@@ -58,6 +61,7 @@ class Scene(NamedTuple):
     dt: float
     t_end: float
     drive: Any = None
+    fluid: Any = None
 
     @property
     def n_bodies(self) -> int:
@@ -67,9 +71,11 @@ class Scene(NamedTuple):
         """Total energy (J) of all bodies: kinetic plus the torque model's potential.
 
         ``q`` ``(..., 4)`` and ``omega`` ``(..., 3)`` with the scene's body axes
-        last (any leading time axes); None when the torque is not conservative.
+        last (any leading time axes); None when the torque is not conservative or a fluid drags.
         """
-        if self.torque is not None and not getattr(self.torque, "conservative", False):
+        if self.fluid is not None or (
+            self.torque is not None and not getattr(self.torque, "conservative", False)
+        ):
             return None
         body_ndim = self.state.q.ndim - 1
         kinetic = kinetic_energy(q, omega, self.inertia)
@@ -278,6 +284,55 @@ def tumbling_cloud(dtype=jnp.float64, n=256, seed=0) -> Scene:
     )
 
 
+def _spheroid_in_shear(dtype, stokes):
+    aspect = 4.0
+    shear = jnp.zeros((3, 3), dtype).at[0, 1].set(1.0)
+    fluid = Fluid.spheroid(_f(aspect, dtype), _f(1.0, dtype), _f(1.0, dtype), velocity_gradient=shear)
+    q0 = quat.exp(_f([0.3, -0.5, 0.7], dtype))
+    state = RotState(q0, fluid.angular_velocity(q0))
+    inertia = None
+    if stokes:
+        shape = _f([aspect**2 + 1, aspect**2 + 1, 2.0], dtype) / 5  # a uniform spheroid's moments / mass
+        inertia = stokes * fluid.friction[0] / shape[0] * shape
+    return fluid, state, inertia, 2 * np.pi * (aspect + 1 / aspect)
+
+
+def spheroid_shear(dtype=jnp.float64, stokes=1e-2) -> Scene:
+    """A prolate spheroid (aspect ratio 4) with inertia in a simple shear: Jeffery's orbit, drifting.
+
+    Reduced units: semi-axes 4 and 1, viscosity 1, the shear ``u = (y, 0, 0)`` of rate 1 (Perrin's
+    frictions, `jaxrot.Fluid.spheroid`); the moments of a uniform spheroid, scaled to the Stokes
+    number ``St = I_⊥ γ̇ / ζ_⊥`` (default 1e-2: the friction relaxes the tumbling in 0.01 and the spin
+    in 0.0056 time units, so ``ζΔt/I`` is 5–9 at the suggested step). Started off the shear plane,
+    turning at the overdamped angular velocity. The horizon is one Jeffery period,
+    ``2π(λ + 1/λ)/γ̇``. Needs a fluid scheme (`jaxrot.FLUID_SCHEMES`): ``rollout(..., fluid=scene.fluid)``.
+    """
+    fluid, state, inertia, period = _spheroid_in_shear(dtype, stokes)
+    return Scene(
+        "spheroid_shear",
+        f"spheroid (aspect 4) in simple shear at Stokes number {stokes:g}, reduced units",
+        state, inertia, None, None, dt=0.05, t_end=float(period), fluid=fluid,
+    )  # fmt: skip
+
+
+def spheroid_shear_overdamped(dtype=jnp.float64) -> Scene:
+    """`spheroid_shear` without inertia (Stokes number 0): Jeffery's orbit, `jaxrot.overdamped_rollout`.
+
+    The orientation alone: ``inertia=None``; ``state.omega`` is the overdamped angular velocity.
+    """
+    fluid, state, _, period = _spheroid_in_shear(dtype, 0.0)
+    return Scene(
+        "spheroid_shear_overdamped",
+        "spheroid (aspect 4) in simple shear without inertia: Jeffery's orbit, reduced units",
+        state, None, None, None, dt=0.1, t_end=float(period), fluid=fluid,
+    )  # fmt: skip
+
+
+# Scenes in a fluid: run by `jaxrot.rollout(..., fluid=scene.fluid)` with a fluid scheme, or by
+# `jaxrot.overdamped_rollout` (inertia None); ``python -m jaxrot compare`` knows them. Kept apart
+# from `SCENES`, which every scheme of `jaxrot.SCHEMES` runs.
+FLUID_SCENES = MappingProxyType({f.__name__: f for f in (spheroid_shear, spheroid_shear_overdamped)})
+
 SCENES = MappingProxyType(
     {
         f.__name__: f
@@ -294,4 +349,4 @@ SCENES = MappingProxyType(
     }
 )
 
-__all__ = ["SCENES", "Scene", "gravity_torque", "per_body", *SCENES]
+__all__ = ["FLUID_SCENES", "SCENES", "Scene", "gravity_torque", "per_body", *SCENES, *FLUID_SCENES]

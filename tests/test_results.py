@@ -38,6 +38,8 @@ RESULTS = {
     "rotor_choice_cpu.json": (None, "python benchmarks/regenerate.py --only rotor_choice"),
     "mujoco_free_body_cpu.json": ("method", "python benchmarks/regenerate.py --only mujoco_free_body"),
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
+    # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
+    "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
     "race_cpu/race_float64.json": ("method", "python benchmarks/regenerate.py --only race64"),
     "race_cpu/race_float32.json": ("method", "python benchmarks/regenerate.py --only race32"),
     "gpu_h100/race_heavy_top_float64.json": ("method", "python benchmarks/race.py (on the GPU)"),

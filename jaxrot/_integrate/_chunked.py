@@ -185,6 +185,8 @@ def rollout_chunks(
     resume: Checkpoint | None = None,
     runtime_check: bool = False,
     check_finite: bool = True,
+    fluid=None,
+    key=None,
 ) -> Iterator[tuple[Trajectory, Checkpoint]]:
     """`jaxrot.rollout` a chunk of steps at a time: yields ``(trajectory_chunk, checkpoint)``.
 
@@ -209,6 +211,7 @@ def rollout_chunks(
         check_finite: as in `jaxrot.rollout`, per chunk: an eager run raises
             `jaxrot.IntegrationError` at the first chunk with a NaN or an infinity
             (saved state numbers within that chunk; its times are global).
+        fluid, key: as in `jaxrot.rollout`; pass the same ones to resume.
 
     Yields:
         ``(trajectory_chunk, checkpoint)``: a `Trajectory` with ``t`` ``(k,)``,
@@ -251,6 +254,8 @@ def rollout_chunks(
         normalize,
         runtime_check,
         check_finite,
+        fluid,
+        key,
     )
     chunk_steps = _check_chunk_steps(chunk_steps, run.save_every)
     # A mismatched checkpoint is rejected now, not at the first chunk.

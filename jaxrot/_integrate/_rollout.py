@@ -30,6 +30,8 @@ def rollout(
     check_finite: bool = True,
     progress: bool = False,
     chunk_steps: int | None = None,
+    fluid=None,
+    key=None,
 ):
     """Integrate rigid-body rotation with a fixed step and return the saved states.
 
@@ -77,6 +79,14 @@ def rollout(
             ``save_every``) via `jaxrot.rollout_chunks`, and concatenate them. The
             result is bit for bit that of one call; chunks of one size compile
             once. To save and resume a long run, use `jaxrot.rollout_chunks`.
+        fluid: a `jaxrot.Fluid` the bodies turn in, or None: its torque
+            (friction, the flow's rotation and strain) is added to ``torque``. Its
+            friction is integrated exactly, so no step is limited by ``I/ζ``: only the
+            schemes of `jaxrot.schemes.FLUID_SCHEMES` (``"exp_midpoint"``, order 2;
+            ``"exp_rk4"``, order 4) take it; the others raise ``ValueError``. The
+            inertia must be principal moments ``(..., 3)`` about the friction's axes.
+        key: a JAX PRNG key for a fluid with ``kT > 0`` (required there; the same
+            key gives the same run); unused otherwise.
 
     Returns:
         `Trajectory` with ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)``,
@@ -129,6 +139,8 @@ def rollout(
         normalize,
         runtime_check,
         check_finite,
+        fluid,
+        key,
     )
     if progress or chunk_steps is not None:
         return chunked_rollout(run, chunk_steps, progress=progress, return_carry=return_carry)

@@ -21,6 +21,7 @@ from .._validation import check_bodies, check_count, check_dt, check_save_every,
 from ..schemes import resolve_scheme
 from . import _blocking
 from ._drive import check_drive, driven_step, driven_torque
+from ._fluid import bind_fluid
 from ._runtime_check import (
     IntegrationError,
     check_in_graph,
@@ -118,6 +119,8 @@ def prepare_run(
     normalize,
     runtime_check,
     check_finite=True,
+    fluid=None,
+    key=None,
 ) -> Run:
     """Check the arguments of `rollout` (before anything compiles) and flatten the particle axes."""
     scheme = resolve_scheme(scheme)
@@ -135,6 +138,10 @@ def prepare_run(
 
     flat_state, inertia = flatten_particles(state, inertia, per_particle)
     args, args_axes = split_per_body(args, batch_shape)
+    if fluid is not None:  # the fluid's per-body values travel with the torque's args
+        scheme, args, args_axes = bind_fluid(
+            scheme, fluid, key, batch_shape, dtype, inertia, args, args_axes, drive
+        )
     if drive_per_particle:
         drive = jax.tree_util.tree_map(lambda x: x.reshape(-1, 3), drive)
     # Sharded particles: each device keeps its own bodies (`jaxrot._integrate._sharding`).
@@ -144,7 +151,9 @@ def prepare_run(
     )
     n = math.prod(batch_shape)
     n_blocks = _blocking.n_blocks_for(n, shards=particle_shards()) if _blocking.on_cpu(flat_state.q) else 1
-    if n_blocks > 1 and _blocking.couples_bodies(torque, n, t0, flat_state, args, args_axes):
+    # Only the torque's own args (not the fluid's) go to the torque.
+    torque_args, torque_axes = (args.args, args_axes.args) if fluid is not None else (args, args_axes)
+    if n_blocks > 1 and _blocking.couples_bodies(torque, n, t0, flat_state, torque_args, torque_axes):
         n_blocks = 1
     return Run(
         scheme,

@@ -3,12 +3,19 @@
 from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
+from ._exponential import (
+    AbstractExponentialLieRK as AbstractExponentialLieRK,
+    ExponentialTableau as ExponentialTableau,
+    FluidCarry as FluidCarry,
+)
 from ._lie_runge_kutta import (
     AbstractLieRungeKutta as AbstractLieRungeKutta,
     LieRungeKuttaCarry as LieRungeKuttaCarry,
 )
 from ._rkn_splitting import AbstractRKNSplitting as AbstractRKNSplitting
 from .euler import Euler as Euler
+from .exp_midpoint import ExpMidpoint as ExpMidpoint
+from .exp_rk4 import ExpRK4 as ExpRK4
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
 from .rkmk4 import RKMK4 as RKMK4
 from .rkmk_dopri5 import RKMKDopri5 as RKMKDopri5
@@ -38,14 +45,21 @@ SCHEMES = MappingProxyType(
     }
 )
 
+# The exponential schemes, which integrate a fluid's friction with no step limit (`jaxrot.Fluid`):
+# named by `jaxrot.rollout` like the others, kept out of `SCHEMES`, whose every member the
+# results files under docs/ cover.
+FLUID_SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (ExpMidpoint(), ExpRK4())})
+
 
 def resolve_scheme(scheme) -> AbstractScheme:
-    """A scheme object from a name in `SCHEMES` or an `AbstractScheme` instance."""
+    """A scheme object from a name in `SCHEMES` or `FLUID_SCHEMES`, or an `AbstractScheme` instance."""
     if isinstance(scheme, AbstractScheme):
         return scheme
     if isinstance(scheme, str) and scheme in SCHEMES:
         return SCHEMES[scheme]
+    if isinstance(scheme, str) and scheme in FLUID_SCHEMES:
+        return FLUID_SCHEMES[scheme]
     raise ValueError(
-        f"`scheme` must be one of {sorted(SCHEMES)} or a jaxrot.schemes.AbstractScheme instance; "
-        f"got {scheme!r}."
+        f"`scheme` must be one of {sorted(SCHEMES) + sorted(FLUID_SCHEMES)} or a "
+        f"jaxrot.schemes.AbstractScheme instance; got {scheme!r}."
     )

@@ -1,0 +1,402 @@
+"""The race in a fluid: a spheroid in shear at Stokes numbers 1e-1, 1e-3, 1e-5, jaxrot against diffrax.
+
+1000 prolate spheroids (aspect ratio 4, Perrin's frictions, uniform density; `jaxrot.scenes.
+spheroid_shear`) in the simple shear u = (y, 0, 0) of rate 1, with random orientations (seed 0),
+each released turning at its overdamped angular velocity, over one Jeffery period (26.7), float64.
+The Stokes number St = I_⊥ γ̇ / ζ_⊥ sets the friction's stiffness: ζΔt/I ≈ 10 Δt at 1e-1, 1e5 Δt at
+1e-5. Rows:
+
+- jaxrot, inertial: ``exp_rk4`` and ``exp_midpoint`` with ``fluid=`` (step ladders as in
+  ``benchmarks/race.py``); at St = 1e-1 also ``rkmk_dopri8`` with the fluid's torque as a plain
+  callable, which is stable while ζΔt/I < ~2.5 (its ladder starts inside that);
+- jaxrot, overdamped: `jaxrot.overdamped_rollout`'s ``rkmk4`` and ``lie_midpoint``:
+  no inertia, so their error against the inertial reference stops at the model's own, of order St;
+  the table says below which budget that disqualifies them;
+- diffrax, as a user would write it: the Euclidean quaternion ODE of `jaxrot.reference_rollout`
+  (``q̇ = ½ q ⊗ (0, ω_b)``, Euler's equations) with the fluid's torque as a plain callable, a PID
+  controller at rtol = atol = tol on a half-decade ladder, vmapped: ``Tsit5`` (explicit) and
+  ``Kvaerno5`` (implicit, for stiff problems). A solver that needs more than ``--max-steps`` steps per
+  body at tol 1e-3 (probed on 8 bodies first) is reported and not raced; a tolerance at which some
+  body fails is reported and skipped.
+
+The error of a row is the largest geodesic orientation error over the bodies at the final time
+against ExpRK4 at 2^14 steps (checked at St = 1e-1 and 1e-3 against `jaxrot.reference_rollout`,
+Dopri8 at 1e-13, on 16 bodies: the gap is in the results file). Each row is one compiled program;
+the rows that can win a budget are re-timed round-robin, as in ``benchmarks/race.py``.
+
+    python benchmarks/fluid_race.py                     # docs/fluid_race_cpu.json and .png (~40 min, 2 cores)
+    python benchmarks/fluid_race.py --quick             # a small check that it runs; writes nothing to docs/
+"""
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxrot
+from jaxrot import quaternion as quat
+from jaxrot._diffrax._reference import adaptive_solve
+from jaxrot._fluid._compare import inertial_runner, overdamped_runner, plain_fluid_torque
+from jaxrot._fluid._overdamped import OVERDAMPED_SCHEMES
+from jaxrot._particles import PARTICLES
+from jaxrot.comparison import machine_info
+from jaxrot.scenes import spheroid_shear
+
+
+ROOT = Path(__file__).resolve().parents[1]
+STOKES = (1e-1, 1e-3, 1e-5)
+BUDGETS = [10.0**-k for k in range(2, 9)]
+DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_kvaerno5": diffrax.Kvaerno5}
+REFERENCE_STEPS = 2**14
+RERUN = "_rerun"
+
+
+def bodies(scene, n, seed=0):
+    """``n`` copies of the scene's spheroid at random orientations, each turning at its overdamped ω."""
+    q = quat.normalize(jax.random.normal(jax.random.PRNGKey(seed), (n, 4), dtype=jnp.float64))
+    return jaxrot.RotState(q, scene.fluid.angular_velocity(q))
+
+
+def step_ladder(order, start, stop=10**6):
+    """Step counts growing by ``min(√2, 10^(1/(2·order)))`` (half a decade of error a rung)."""
+    growth = min(math.sqrt(2.0), 10.0 ** (1.0 / (2.0 * order)))
+    steps, k = start, 0
+    while steps <= stop:
+        yield steps
+        k += 1
+        steps = max(steps + 1, int(round(start * growth**k)))
+
+
+def seconds_of(compiled, *args):
+    start = time.perf_counter()
+    jax.block_until_ready(compiled(*args))
+    return time.perf_counter() - start
+
+
+def timed(compiled, *args, repeats):
+    out = jax.block_until_ready(compiled(*args))
+    return out, statistics.median(seconds_of(compiled, *args) for _ in range(repeats))
+
+
+def explicit_runner(name, scene):
+    """A scheme of `jaxrot.SCHEMES` with the fluid's torque as a plain callable (no fluid=)."""
+    scheme = jaxrot.SCHEMES[name]
+    inertia = jaxrot.body_inertia(scene.inertia)
+    torque = plain_fluid_torque(scene)
+
+    def run(state, dt, n, saves):
+        def one(q, omega):
+            carry = scheme.init(jaxrot.RotState(q, omega), jnp.zeros(()), inertia, torque, None)
+            step = lambda i, c: scheme.step(c, i.astype(dt.dtype) * dt, dt, inertia, torque, None)  # noqa: E731
+            return scheme.state(jax.lax.fori_loop(0, n, step, carry))
+
+        final = jax.vmap(one, axis_name=PARTICLES)(state.q, state.omega)
+        return jax.tree_util.tree_map(lambda x: x[None], final)
+
+    return run
+
+
+def diffrax_runner(solver_cls, scene, max_steps):
+    torque = plain_fluid_torque(scene)
+    ts = jnp.array([0.0, scene.t_end])
+
+    def run(state, tol):
+        traj, result, steps = adaptive_solve(
+            solver_cls(),
+            state.q,
+            state.omega,
+            scene.inertia,
+            False,
+            ts,
+            torque,
+            None,
+            tol,
+            tol,
+            max_steps,
+            None,
+        )
+        return traj.q[-1], result, steps
+
+    return jax.jit(run)
+
+
+def error_of(q, q_ref):
+    return float(jnp.max(quat.angle_between(q, q_ref)))
+
+
+def race_one(stokes, n, repeats, time_cap, floor, max_steps, quick, log):
+    scene = spheroid_shear(stokes=stokes)
+    state = bodies(scene, n)
+    t_end = scene.t_end
+    log(
+        f"== St = {stokes:g}: ζ/I = {float(jnp.min(scene.fluid.friction / scene.inertia)):.3g} … "
+        f"{float(jnp.max(scene.fluid.friction / scene.inertia)):.3g}, N = {n}, t = {t_end:.4g}"
+    )
+    ref_run = jax.jit(inertial_runner(jaxrot.FLUID_SCHEMES["exp_rk4"], scene, n), static_argnums=3)
+    ref_steps = REFERENCE_STEPS // (16 if quick else 1)
+    q_ref = ref_run(state, jnp.asarray(t_end / ref_steps), ref_steps, 1).q[-1]
+    check = None
+    if stokes >= 1e-3:  # the fine ExpRK4 against Dopri8 where Dopri8 can still afford the friction
+        few = jax.tree_util.tree_map(lambda x: x[:16], state)
+        dopri = jaxrot.reference_rollout(
+            few,
+            scene.inertia,
+            jnp.array([0.0, t_end]),
+            torque=plain_fluid_torque(scene),
+            rtol=1e-13,
+            atol=1e-13,
+            max_steps=10**7,
+        ).q[-1]
+        check = error_of(dopri, q_ref[:16])
+        log(f"  reference: ExpRK4, {ref_steps} steps; Dopri8 (1e-13) differs by {check:.2e} rad on 16 bodies")
+    rows = []
+    common = {"stokes": stokes, "particles": n}
+
+    def fixed(name, label, run, order, first, evals_per_step):
+        compiled = jax.jit(run, static_argnums=3).lower(state, jnp.asarray(1.0), 1, 1).compile()
+        errors = []
+        for steps in step_ladder(order, first):
+            dt = t_end / steps
+            out, seconds = timed(compiled, state, jnp.asarray(dt), steps, repeats=repeats)
+            err = error_of(out.q[-1], q_ref)
+            rows.append(
+                {
+                    **common,
+                    "method": label,
+                    "kind": "fixed",
+                    "model": "overdamped" if "overdamped" in label else "inertial",
+                    "n_steps": steps,
+                    "dt": dt,
+                    "tol": None,
+                    "max_orientation_error_rad": err,
+                    "torque_evals": evals_per_step * steps,
+                    "seconds": seconds,
+                    RERUN: (compiled, (state, jnp.asarray(dt), steps)),
+                }
+            )
+            log(f"  {label:24s} steps {steps:7d}  err {err:9.2e}  {seconds * 1e3:9.2f} ms")
+            errors.append(err)
+            # Stalled: at the model's floor (the overdamped rows) or round-off, not while saturated.
+            stalled = len(errors) >= 3 and 0.7 * errors[-3] < errors[-1] < 0.1
+            if err < floor or seconds > time_cap or stalled or (quick and (len(errors) >= 12 or err < 1e-4)):
+                break
+
+    for name, scheme in jaxrot.FLUID_SCHEMES.items():
+        fixed(name, name, inertial_runner(scheme, scene, n), scheme.order, 8, scheme.torque_evals_per_step)
+    for name in ("rkmk4", "lie_midpoint"):
+        scheme = OVERDAMPED_SCHEMES[name]
+        fixed(
+            f"overdamped_{name}",
+            f"overdamped_{name}",
+            overdamped_runner(scheme, scene, n),
+            scheme.order,
+            8,
+            scheme.velocity_evals_per_step,
+        )
+    if stokes >= 1e-1:
+        rate = float(jnp.max(scene.fluid.friction / scene.inertia))
+        first = int(math.ceil(t_end * rate / 2.5))  # inside its stability limit, ζΔt/I < 2.5
+        scheme = jaxrot.SCHEMES["rkmk_dopri8"]
+        fixed(
+            "rkmk_dopri8",
+            "rkmk_dopri8 (plain torque)",
+            explicit_runner("rkmk_dopri8", scene),
+            scheme.order,
+            first,
+            scheme.torque_evals_per_step,
+        )
+    skipped, rows_failed = {}, []
+    for name, solver in DIFFRAX.items():
+        compiled = diffrax_runner(solver, scene, max_steps).lower(state, jnp.asarray(1e-6)).compile()
+        probe = jax.tree_util.tree_map(lambda x: x[:8], state)
+        _, result, steps = diffrax_runner(solver, scene, max_steps)(probe, jnp.asarray(1e-3))
+        if np.any(np.asarray(result != diffrax.RESULTS.successful)):
+            skipped[name] = f"more than {max_steps} steps per body at tol 1e-3 (8 bodies probed)"
+            log(f"  {name}: not raced: {skipped[name]}")
+            continue
+        for tol in [10 ** (-k / 2) for k in range(4, 27)]:
+            (q, result, steps), seconds = timed(compiled, state, jnp.asarray(tol), repeats=repeats)
+            if np.any(np.asarray(result != diffrax.RESULTS.successful)):
+                failed = int(np.sum(np.asarray(result != diffrax.RESULTS.successful)))
+                log(f"  {name}: failed at tol {tol:.1e} ({failed} of {n} bodies past max_steps)")
+                rows_failed.append({"method": name, "tol": tol, "bodies_failed": failed})
+                continue
+            err = error_of(q, q_ref)
+            mean_steps = float(np.mean(np.asarray(steps)))
+            rows.append(
+                {
+                    **common,
+                    "method": name,
+                    "kind": "adaptive",
+                    "model": "inertial",
+                    "n_steps": int(round(mean_steps)),
+                    "dt": None,
+                    "tol": tol,
+                    "max_orientation_error_rad": err,
+                    "torque_evals": None,
+                    "seconds": seconds,
+                    RERUN: (compiled, (state, jnp.asarray(tol))),
+                }
+            )
+            log(f"  {name:24s} tol {tol:8.1e} steps {mean_steps:9.1f} err {err:9.2e} {seconds * 1e3:9.2f} ms")
+            if err < floor or seconds > 4 * time_cap or (quick and tol < 1e-5):
+                break
+    return rows, check, {"not_raced": skipped, "failed": rows_failed}, ref_steps
+
+
+def is_diffrax(row):
+    return row["method"] in DIFFRAX
+
+
+def finalists(rows, per_side=3):
+    chosen = {}
+    for budget in BUDGETS:
+        fastest = {}
+        for r in (r for r in rows if r["max_orientation_error_rad"] <= budget):
+            if r["method"] not in fastest or r["seconds"] < fastest[r["method"]]["seconds"]:
+                fastest[r["method"]] = r
+        for side in (True, False):
+            ranked = sorted(
+                (r for r in fastest.values() if is_diffrax(r) == side), key=lambda r: r["seconds"]
+            )
+            chosen.update((id(r), r) for r in ranked[:per_side])
+    return list(chosen.values())
+
+
+def retime(rows, rounds, log):
+    """Round-robin re-timing of the `finalists`: both sides of a ratio see the same machine load."""
+    final = finalists(rows)
+    samples = {id(r): [] for r in final}
+    for _ in range(rounds):
+        for r in final:
+            compiled, args = r[RERUN]
+            samples[id(r)].append(seconds_of(compiled, *args))
+    for r in final:
+        r["ladder_seconds"] = r["seconds"]
+        r["seconds"] = statistics.median(samples[id(r)])
+    log(f"  re-timed {len(final)} finalists side by side, {rounds} rounds")
+
+
+def label(row):
+    if row is None:
+        return None
+    setting = f"{row['n_steps']} steps" if row["kind"] == "fixed" else f"tol {row['tol']:.0e}"
+    return f"{row['method']} {setting} {row['seconds'] * 1e3:.3g} ms"
+
+
+def budget_table(rows):
+    table = []
+    for budget in BUDGETS:
+        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
+        ours = min((r for r in ok if not is_diffrax(r)), key=lambda r: r["seconds"], default=None)
+        theirs = min((r for r in ok if is_diffrax(r)), key=lambda r: r["seconds"], default=None)
+        ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
+        table.append({"budget": budget, "jaxrot": label(ours), "diffrax": label(theirs), "ratio": ratio})
+    return table
+
+
+def overdamped_floor(rows):
+    """The smallest error any overdamped row reached: below it the model's own error disqualifies it."""
+    errors = [r["max_orientation_error_rad"] for r in rows if r["model"] == "overdamped"]
+    return min(errors) if errors else None
+
+
+def plot(report, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = report["runs"]
+    fig, axes = plt.subplots(
+        1, len(runs), figsize=(5.2 * len(runs), 4.2), constrained_layout=True, squeeze=False
+    )
+    for ax, run in zip(axes[0], runs, strict=True):
+        rows = run["rows"]
+        for name in dict.fromkeys(r["method"] for r in rows):
+            mine = [r for r in rows if r["method"] == name]
+            style = {"linestyle": "--", "marker": "s"} if mine[0]["kind"] == "adaptive" else {"marker": "o"}
+            ax.loglog(
+                [r["seconds"] * 1e3 for r in mine],
+                [r["max_orientation_error_rad"] for r in mine],
+                label=name,
+                **style,
+            )
+        ax.set(title=f"St = {run['stokes']:g}", xlabel="wall time [ms]", ylabel="max orientation error [rad]")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize="x-small")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--n", type=int, default=1000)
+    parser.add_argument("--stokes", default=",".join(f"{s:g}" for s in STOKES))
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--time-cap", type=float, default=4.0, help="stop a ladder past this many s per run")
+    parser.add_argument(
+        "--max-steps",
+        type=int,
+        default=20_000,
+        help="diffrax's steps per body, at most (diffrax's default: 4096)",
+    )
+    parser.add_argument("--rounds", type=int, default=7, help="round-robin re-timing rounds")
+    parser.add_argument("--out", default=None, help="folder for fluid_race_cpu.json/.png (default docs/)")
+    parser.add_argument(
+        "--quick", action="store_true", help="16 bodies, short ladders; writes nothing unless --out"
+    )
+    ns = parser.parse_args(argv)
+    if ns.quick:
+        ns.n, ns.repeats, ns.rounds = min(ns.n, 16), 1, 1
+    out = Path(ns.out) if ns.out else (None if ns.quick else ROOT / "docs")
+    log = lambda s: print(s, flush=True)  # noqa: E731
+    info = machine_info()
+    log(f"machine: {info}")
+    report = {"machine": info, "options": vars(ns), "budgets": BUDGETS, "runs": []}
+    for stokes in (float(s) for s in ns.stokes.split(",")):
+        rows, check, skipped, ref_steps = race_one(
+            stokes, ns.n, ns.repeats, ns.time_cap, BUDGETS[-1] / 3, ns.max_steps, ns.quick, log
+        )
+        retime(rows, ns.rounds, log)
+        table = budget_table(rows)
+        floor = overdamped_floor(rows)
+        log(f"  overdamped model's smallest error against the inertial reference: {floor:.2e} rad")
+        for line in table:
+            ratio = "—" if line["ratio"] is None else f"{line['ratio']:.1f}x"
+            log(f"  {line['budget']:.0e}: {line['jaxrot']} | {line['diffrax']} | {ratio}")
+        report["runs"].append(
+            {
+                "stokes": stokes,
+                "reference_steps": ref_steps,
+                "reference_vs_dopri8": check,
+                "diffrax_failures": skipped,
+                "overdamped_floor": floor,
+                "table": table,
+                "rows": [{k: v for k, v in r.items() if k != RERUN} for r in rows],
+            }
+        )
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "fluid_race_cpu.json").write_text(json.dumps(report, indent=2))
+        plot(report, out / "fluid_race_cpu.png")
+        log(f"wrote {out / 'fluid_race_cpu.json'} and .png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,193 @@
+"""`overdamped_rollout`: bodies without inertia in a fluid, the orientation alone."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import quaternion as quat
+from .._compile import filter_jit
+from .._integrate._runtime_check import IntegrationError, nonfinite_message
+from .._particles import PARTICLES, split_per_body, unflatten_trajectory
+from .._state import Trajectory
+from .._validation import (
+    QUATERNION_NORM_TOL,
+    check_count,
+    check_dt,
+    check_save_every,
+    check_torque,
+    declared_dtype,
+    float_dtype,
+    is_concrete,
+)
+from ..schemes._base import world_torque
+from ..schemes._rkn_splitting import uses_omega
+from ._flow import flow_rotation
+from ._fluid import check_fluid
+from ._overdamped import resolve_overdamped
+
+
+def overdamped_rollout(
+    q,
+    fluid,
+    dt,
+    n_steps: int,
+    *,
+    torque=None,
+    args=None,
+    scheme=None,
+    save_every: int = 1,
+    t0=0.0,
+    key=None,
+) -> Trajectory:
+    """Bodies without inertia in a fluid: the orientation turned by the fluid and the torque.
+
+    The limit of `jaxrot.rollout` as ``I/ζ → 0`` (Stokes number 0): the fluid's torque balances
+    ``torque`` at every instant, and the body turns at
+
+        ω = Ω + B p × (E p) + R (ζ⁻¹ ⊙ Rᵀ τ),
+
+    world frame, with ``Ω``, ``E``, ``B``, ``ζ`` of ``fluid`` (`jaxrot.Fluid`), ``R`` the rotation
+    of ``q`` and ``p = R e_z``. Nothing in it is stiff: the step is set by the flow and the torque
+    alone. Jeffery's orbits (``torque=None``) come out of it; `jaxrot.rollout` with a fluid tends to
+    it as the Stokes number ``I γ̇/ζ`` falls, with an error of order the Stokes number.
+
+    Args:
+        q: unit quaternions ``(..., 4)``, scalar first, body → world; leading axes are bodies.
+        fluid: a `jaxrot.Fluid` (fields shared or one per body).
+        dt: time step > 0; n_steps: number of steps (>= 0).
+        torque: ``torque(t, q, omega, args) -> (3,)`` world torque on one body, or None. It receives
+            as ``omega`` the flow's part of the angular velocity, ``Ω + B p × (E p)`` (without the
+            torque's own part, which it determines): a torque that depends on ``omega`` is refused
+            (``ValueError``), as the balance would be an implicit equation; fold a linear drag into
+            ``fluid.friction`` instead.
+        args: the torque's parameters (`jaxrot.per_body` leaves: one per body).
+        scheme: None (``"rkmk4"``, order 4), ``"lie_euler"`` (1), ``"lie_midpoint"`` (2), or a scheme
+            instance, e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")`` (half the
+            operations a step, not exact at a constant angular velocity).
+        save_every: save every ``save_every`` steps (it must divide ``n_steps``); t0: initial time.
+        key: a JAX PRNG key, required when ``fluid.kT > 0`` (thermal rotation); unused otherwise.
+
+    Returns:
+        `jaxrot.Trajectory`: ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)`` and ``omega``
+        ``(n_saved, ..., 3)``, the world angular velocity above at each saved state.
+
+    Raises:
+        ValueError: a wrong shape, a non-unit or non-finite ``q``, ``dt <= 0``, ``n_steps < 0``, a
+            ``save_every`` that does not divide ``n_steps``, an unknown scheme, a bad fluid, a torque
+            that depends on ``omega``, or ``kT > 0`` without a ``key``; before anything compiles.
+        jaxrot.IntegrationError: (eager) a saved state holds a NaN or an infinity.
+
+    Example:
+        >>> import jax.numpy as jnp, jaxrot
+        >>> shear = jnp.zeros((3, 3)).at[0, 1].set(1.0)  # u = (y, 0, 0), shear rate 1
+        >>> fluid = jaxrot.Fluid.spheroid(3.0, 1.0, viscosity=1.0, velocity_gradient=shear)
+        >>> q0 = jaxrot.quaternion.from_axis_angle(jnp.array([0.0, 1, 0]), jnp.pi / 2)  # axis along x
+        >>> period = 2 * jnp.pi * (3 + 1 / 3)  # Jeffery's period at aspect ratio 3
+        >>> traj = jaxrot.overdamped_rollout(q0, fluid, period / 2000, 2000, save_every=1000)
+        >>> axis = jaxrot.quaternion.rotate(traj.q, jnp.array([0.0, 0, 1]))
+        >>> (axis.round(6) + 0.0).tolist()  # tumbled: a half turn in half a period, home after one
+        [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    """
+    q, dtype = _check_orientations(q)
+    batch_shape = tuple(q.shape[:-1])
+    dt = check_dt(dt).astype(dtype)
+    n_steps = check_count(n_steps, "n_steps", 0)
+    save_every = check_save_every(save_every, n_steps)
+    check_torque(torque)
+    t0 = jnp.asarray(t0).astype(dtype)
+    if t0.ndim != 0:
+        raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
+    scheme = resolve_overdamped(scheme)
+    fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
+    args, args_axes = split_per_body(args, batch_shape)
+    n = math.prod(batch_shape)
+    traj = _overdamped_flat(
+        scheme,
+        q.reshape(n, 4),
+        fluid,
+        fluid_axes,
+        dt,
+        t0,
+        torque,
+        args,
+        args_axes,
+        n_steps // save_every,
+        save_every,
+    )
+    traj = unflatten_trajectory(traj, batch_shape)
+    if is_concrete(traj):
+        text = nonfinite_message(traj, dt, scheme.name, "jaxrot.overdamped_rollout")
+        if text is not None:
+            raise IntegrationError(text)
+    return traj
+
+
+def _check_orientations(q):
+    dtype = declared_dtype(q, "q")
+    q = jnp.asarray(q)
+    if q.ndim < 1 or q.shape[-1] != 4:
+        raise ValueError(f"`q` must have shape (..., 4) (scalar-first [w, x, y, z]); got {q.shape}.")
+    q = q.astype(dtype if dtype is not None else float_dtype(q))
+    if is_concrete(q):
+        raw = np.asarray(q, dtype=np.float64)
+        if not np.all(np.isfinite(raw)):
+            raise ValueError("`q` contains NaN or infinite values.")
+        worst = float(np.max(np.abs(np.linalg.norm(raw, axis=-1) - 1))) if raw.size else 0.0
+        if worst > QUATERNION_NORM_TOL:
+            raise ValueError(
+                f"`q` must be unit quaternions (| |q| - 1 | <= {QUATERNION_NORM_TOL:g}); the worst is off by "
+                f"{worst:.3g}. Normalise it (jaxrot.quaternion.normalize)."
+            )
+    return q, q.dtype
+
+
+def velocity_field(fluid, torque, args):
+    """``velocity(t, q) -> (3,)``: the overdamped world angular velocity of one body."""
+
+    def velocity(t, q):
+        omega = flow_rotation(q, fluid.velocity_gradient, fluid.bretherton)
+        if torque is None:
+            return omega
+        if uses_omega(torque, t, q, omega, args):
+            raise ValueError(
+                "`torque` depends on the angular velocity, which the overdamped model does not have as a "
+                "state (ω is what balances the torques): fold a linear drag into `fluid.friction`, or "
+                "integrate the inertial model, jaxrot.rollout(..., fluid=fluid)."
+            )
+        tau = world_torque(torque, t, q, omega, args)
+        return omega + quat.rotate(q, quat.rotate(quat.conjugate(q), tau) / fluid.friction)
+
+    return velocity
+
+
+@filter_jit
+def _overdamped_flat(scheme, q, fluid, fluid_axes, dt, t0, torque, args, args_axes, n_saves, save_every):
+    """The time loop over ``(N, 4)`` orientations: ``n_saves`` saves of ``save_every`` steps."""
+
+    def init_one(q, fluid, args):
+        return scheme.init(q, t0, velocity_field(fluid, torque, args))
+
+    def step_one(carry, t, fluid, args):
+        return scheme.step(carry, t, dt, velocity_field(fluid, torque, args))
+
+    init_all = jax.vmap(init_one, in_axes=(0, fluid_axes, args_axes), axis_name=PARTICLES)
+    step_all = jax.checkpoint(
+        jax.vmap(step_one, in_axes=(0, None, fluid_axes, args_axes), axis_name=PARTICLES), prevent_cse=False
+    )
+
+    def save_interval(carry, save_index):
+        def one_step(c, j):
+            t = t0 + (save_index * save_every + j).astype(dt.dtype) * dt
+            return step_all(c, t, fluid, args), None
+
+        carry, _ = jax.lax.scan(one_step, carry, jnp.arange(save_every))
+        return carry, carry
+
+    carry = init_all(q, fluid, args)
+    _, saved = jax.lax.scan(save_interval, carry, jnp.arange(n_saves))
+    t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
+    return Trajectory(
+        t, jnp.concatenate([carry.q[None], saved.q]), jnp.concatenate([carry.omega[None], saved.omega])
+    )

@@ -1,0 +1,330 @@
+"""Exponential Lie-group Runge–Kutta schemes: a fluid's friction integrated exactly, any ζΔt/I.
+
+In the body frame, with ``u = ω_b``, a body in a fluid (`jaxrot.Fluid`) obeys
+
+    I u̇ = ζ ⊙ (S(t, q) − u) + (torque that is not in S) − u × I u,      q̇ = ½ q ⊗ (0, u),
+
+where the *slow velocity* ``S`` is the angular velocity at which the fluid's torque balances: the
+flow's ``ω_f`` (`jaxrot._fluid._flow`) plus ``ζ⁻¹ ⊙ τ_b`` when the applied torque ``τ`` does not
+depend on ω. With ``L = ζ/I`` (principal moments: diagonal) and the deviation ``v = u − S``,
+
+    v̇ = −L v + N(t, q, u),   N = I⁻¹(τ_b,ω-dependent − u × I u) − Ṡ,          (1)
+
+and the only large term, ``−L v``, is linear: ``Ṡ`` (the flow's part written out,
+`jaxrot._fluid._flow.body_flow`; the torque's part a `jax.jvp` along ``q̇``) and the gyroscopic term
+stay bounded as ``L → ∞``. The rotation vector ``Θ`` of ``q = q_n ⊗ exp(Θ)``
+obeys ``Θ̇ = v + [S + dexp⁻¹_{−Θ}(u) − u]``: the pair ``(v, Θ)`` is a semilinear system with the
+linear part ``[[−L, 0], [1, 0]]`` and a bounded, smooth nonlinear part. An explicit exponential
+Runge–Kutta method (Hochbruck & Ostermann, SIAM J. Numer. Anal. 43, 1069 (2005); Acta Numerica
+19, 209 (2010)) applied to it takes the linear part exactly: the φ-functions of that matrix act on
+``v`` as ``φ_k(−c h L)`` and on ``Θ`` as ``c h φ_{k+1}(−c h L)`` (the step-averaged ``v``), so
+
+    V_i = e^{−c_i hL} v_n + h Σ_j a_ij(−hL) N_j,
+    Θ_i = c_i h φ_1(−c_i hL) v_n + h² Σ_j ã_ij(−hL) N_j + h Σ_j a_ij(0) (K_j − V_j),
+    K_j = dexp⁻¹_{−Θ_j}(S_j + V_j),   q_i = q_n ⊗ exp(Θ_i),
+
+with ``ã_ij(z) = (a_ij(z) − a_ij(0))/z``: for a term ``φ_k(c z)`` of ``a_ij`` that is
+``c φ_{k+1}(c z)``. Why the orders hold uniformly in ``L``: the error of each stage is the
+variation-of-constants integral of the interpolation error of ``N``, ``∫ e^{−L(h−s)}(N − p)(s) ds``,
+bounded by ``min(h, 1/L) · sup|N − p|``; ``N`` is bounded and smooth on the slow manifold, so a
+tableau that satisfies the *stiff* order conditions keeps its order whatever ``hL`` (measured:
+orders 2 and 4 from ``hL = 0`` to 4.5e7, ``benchmarks/fluid_orders.py``; in between, at ``hL`` of
+about 5 to 30, ExpRK4's error constant has a hump). Written for ``u`` itself (``S = 0``) the
+forcing would be ``L S`` — proportional to the stiffness — and the ``Θ``-stages would evaluate
+``dexp⁻¹`` at extrapolated velocities: in a prototype of that form (not kept), the fourth-order
+tableau dropped to order 3 for ``hL ≫ 1``, as it did when an ω-independent torque was left in
+``N`` as ``I⁻¹ τ``. As ``hL → ∞`` the scheme tends to the tableau's classical method (``z = 0``)
+applied to the overdamped model ``q̇ = ½ q ⊗ (0, S)``.
+
+One limit remains: a body started far from ``S`` (at rest in a shear, say) relaxes within ``I/ζ``;
+a first step much longer than that integrates the relaxation's own small turn, ``(I/ζ)|u_0 − S|``,
+to first order: an error ``O(h (I/ζ) |u_0 − S| |∇S|)`` from the first step alone.
+
+Without a fluid (``L = 0``, ``S = 0``) every ``φ_k`` is ``1/k!`` and the scheme is the tableau's
+classical Runge–Kutta method on ``(q, ω_b)``.
+"""
+
+import dataclasses
+import math
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import quaternion as quat
+from .._fluid._flow import body_flow
+from .._fusion import stage
+from .._inertia import body_inertia
+from .._state import RotState
+from ._base import AbstractScheme, world_torque
+from ._lie_runge_kutta import CHARTS
+from ._phi import phi_functions
+from ._rkn_splitting import uses_omega
+
+
+Term = tuple[float, int, float]  # (coefficient, k, node): coefficient · φ_k(node · z)
+
+
+class ExponentialTableau(NamedTuple):
+    """An explicit exponential Runge–Kutta method: its coefficient functions as sums of φ-functions.
+
+    Attributes:
+        c: the nodes of stages 2, …, s (stage 1 is at 0).
+        a: for each of stages 2, …, s, ``{j: terms}``: ``a_ij(z) = Σ coefficient · φ_k(node · z)``
+            over its terms ``(coefficient, k, node)`` (``j`` counts stages from 0).
+        b: ``{j: terms}``, the weights of the step.
+    """
+
+    c: tuple[float, ...]
+    a: tuple[dict[int, tuple[Term, ...]], ...]
+    b: dict[int, tuple[Term, ...]]
+
+    @property
+    def num_stages(self) -> int:
+        return len(self.c) + 1
+
+    def rows(self):
+        """``(node, row)`` of stages 2, …, s, then ``(1.0, b)``."""
+        return [*zip(self.c, self.a, strict=True), (1.0, self.b)]
+
+    def k_max(self) -> int:
+        """The highest φ-function the ``Θ``-rows need (one above the highest term)."""
+        return 1 + max(k for _, row in self.rows() for terms in row.values() for _, k, _ in terms)
+
+    def check(self):
+        """``Σ_j a_ij(z) = c_i φ_1(c_i z)`` and ``Σ_j b_j(z) = φ_1(z)`` at a few ``z`` (float64)."""
+        for node, row in self.rows():
+            for z in (0.0, -0.3, -4.0, -60.0):
+                total = sum(_term_value(t, z) for terms in row.values() for t in terms)
+                expected = node * float(phi_functions(np.float64(node * z), 1)[1])
+                if abs(total - expected) > 1e-12 * max(1.0, abs(expected)):
+                    raise TypeError(
+                        f"exponential tableau row at node {node}: Σ a(z={z}) = {total}, not {expected}."
+                    )
+
+
+def _term_value(term, z):
+    coefficient, k, node = term
+    return coefficient * float(phi_functions(np.float64(node * z), k)[k])
+
+
+def _weights(tableau: ExponentialTableau, z):
+    """For each row: ``(e^{c z}, c φ_1(c z), {j: a_ij(z)}, {j: ã_ij(z)}, {j: a_ij(0)})``.
+
+    ``z = −hL`` ``(3,)``, or None (no friction): then the Python numbers of ``z = 0``."""
+    k_max = tableau.k_max()
+    nodes = sorted(
+        {node for node, _ in tableau.rows()}
+        | {t[2] for _, r in tableau.rows() for ts in r.values() for t in ts}
+    )
+    if z is None:
+        phis = {node: [1 / math.factorial(k) for k in range(k_max + 1)] for node in nodes}
+    else:
+        phis = {node: phi_functions(node * z, k_max) for node in nodes}
+    rows = []
+    for node, row in tableau.rows():
+        a = {j: sum(c * phis[nu][k] for c, k, nu in terms) for j, terms in row.items()}
+        a_int = {j: sum(c * nu * phis[nu][k + 1] for c, k, nu in terms) for j, terms in row.items()}
+        a_zero = {j: sum(c / math.factorial(k) for c, k, _ in terms) for j, terms in row.items()}
+        rows.append((phis[node][0], node * phis[node][1], a, a_int, a_zero))
+    return rows
+
+
+def _sum(weights, values):
+    """``Σ_j weights[j] · values[j]`` over the nonzero weights, or None."""
+    terms = [w * values[j] for j, w in weights.items() if not (isinstance(w, float) and w == 0.0)]
+    if not terms:
+        return None
+    total = terms[0]
+    for term in terms[1:]:
+        total = total + term
+    return total
+
+
+class FluidCarry(NamedTuple):
+    """What an exponential scheme carries between steps in a fluid (one body).
+
+    Attributes:
+        state: the `RotState` ``(q (4,), omega (3,))``, world ω.
+        slow: the slow velocity ``S`` ``(3,)`` (body frame) at the state: the next step's first stage.
+        forcing: ``N`` ``(3,)`` of equation (1) at the state: the next step's first stage.
+    """
+
+    state: RotState
+    slow: jax.Array
+    forcing: jax.Array
+
+
+class FluidArgs(NamedTuple):
+    """The ``args`` of an exponential scheme in a fluid: the torque's own and one body's `jaxrot.Fluid`."""
+
+    args: Any
+    fluid: Any
+
+
+class AbstractExponentialLieRK(AbstractScheme):
+    """An exponential Lie-group Runge–Kutta scheme given by an `ExponentialTableau` (see the module).
+
+    Without a fluid it is the tableau's classical method on ``(q, ω_b)`` (carry: `RotState`). Made
+    for `jaxrot.rollout`'s ``fluid=``: `in_fluid` gives the same scheme reading ``args`` as a
+    `FluidArgs` and carrying a `FluidCarry`. Any torque: one that does not depend on ω (read from its
+    jaxpr, `jaxrot.schemes._rkn_splitting.uses_omega`) is folded into the slow velocity, where a
+    stiff one costs no order; one that does is integrated as a force (``N``), fourth order only
+    while ``I⁻¹ ∂τ/∂ω`` is not stiff.
+
+    ``chart`` (static): ``"exp"`` (default) or ``"cayley"``, the coordinates of the stage rotations
+    ``q_n ⊗ ψ(Θ)``, as in `jaxrot.schemes.AbstractLieRungeKutta`.
+    """
+
+    chart: str = eqx.field(default="exp", static=True)
+    fluid: bool = eqx.field(default=False, static=True)
+    tableau: eqx.AbstractClassVar[ExponentialTableau]
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        tableau = cls.__dict__.get("tableau")
+        if tableau is not None:
+            tableau.check()
+            cls.torque_evals_per_step = tableau.num_stages
+
+    def __check_init__(self):
+        if self.chart not in CHARTS:
+            raise ValueError(f"`chart` must be one of {sorted(CHARTS)}; got {self.chart!r}.")
+
+    def in_fluid(self) -> "AbstractExponentialLieRK":
+        """This scheme for `jaxrot.rollout`'s ``fluid=``: ``args`` a `FluidArgs`, the carry a `FluidCarry`."""
+        return dataclasses.replace(self, fluid=True)
+
+    @property
+    def torque_evals_at_init(self) -> int:
+        return 1 if self.fluid else 0
+
+    def state(self, carry):
+        return carry.state if self.fluid else carry
+
+    def with_state(self, carry, state, inertia):
+        if self.fluid:
+            raise NotImplementedError("drives are not supported in a fluid")
+        return state
+
+    def init(self, state, t0, inertia, torque, args):
+        if not self.fluid:
+            return RotState(*state)
+        args, fluid = args
+        inertia = _diagonal(inertia)
+        q, omega = state
+        u = quat.rotate(quat.conjugate(q), omega)
+        slow, forcing, _ = self._evaluate(t0, q, inertia, torque, args, fluid, velocity=u)
+        return FluidCarry(RotState(q, omega), slow, forcing)
+
+    def step(self, carry, t, dt, inertia, torque, args):
+        if self.fluid:
+            args, fluid = args
+            inertia = _diagonal(inertia)
+            (q0, omega0), slow0, forcing0 = carry
+            rate = fluid.friction * inertia.inverse
+            z = -dt * rate
+
+            def evaluate(t_i, q_i, deviation):
+                return self._evaluate(t_i, q_i, inertia, torque, args, fluid, deviation=deviation)
+
+        else:
+            inertia = body_inertia(inertia)
+            q0, omega0 = carry
+            slow0 = None
+            z = None
+
+            def evaluate(t_i, q_i, deviation):
+                return None, _plain_forcing(t_i, q_i, deviation, inertia, torque, args), deviation
+
+            forcing0 = None
+        u0 = quat.rotate(quat.conjugate(q0), omega0)
+        deviation0 = u0 if slow0 is None else u0 - slow0
+        if forcing0 is None:
+            forcing0 = evaluate(t, q0, deviation0)[1]
+        q1, u1, slow1, forcing1 = self._advance(q0, deviation0, forcing0, slow0, t, dt, z, evaluate)
+        state1 = RotState(q1, quat.rotate(q1, u1))
+        return FluidCarry(state1, slow1, forcing1) if self.fluid else state1
+
+    def _advance(self, q0, deviation0, forcing0, slow0, t, h, z, evaluate):
+        """One step of the stages in the module's docstring: ``(q1, u1, S1, N1)`` (``S1``, ``N1`` at the
+        end point: the next step's first stage)."""
+        chart, inverse_differential = CHARTS[self.chart]
+        forcings = [forcing0]
+        # K_1 − V_1 = S_1: Θ_1 = 0, where dexp⁻¹ is the identity.
+        rotation_terms = [jnp.zeros_like(deviation0) if slow0 is None else slow0]
+        rows = _weights(self.tableau, z)
+        for i, ((decay, transient, a, a_int, a_zero), (node, _)) in enumerate(
+            zip(rows, self.tableau.rows(), strict=True)
+        ):
+            deviation = decay * deviation0
+            increment = _sum(a, forcings)
+            if increment is not None:
+                deviation = deviation + h * increment
+            theta = (h * transient) * deviation0
+            for weights, values, scale in ((a_int, forcings, h * h), (a_zero, rotation_terms, h)):
+                part = _sum(weights, values)
+                if part is not None:
+                    theta = theta + scale * part
+            # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes earlier stages in later ones.
+            theta, deviation = stage(theta, deviation)
+            rotation, chart_scalar = stage(*chart(theta))
+            q_i = stage(quat.multiply(q0, rotation))
+            last = i == len(rows) - 1
+            if last:
+                q_i = quat.normalize(q_i)
+            slow, forcing, u = stage(*evaluate(t + node * h, q_i, deviation))
+            if last:
+                return q_i, u, slow, forcing
+            forcings.append(forcing)
+            # Right-trivialised: Θ̇ = dψ⁻¹_{−Θ}(u) for q = q_n ⊗ ψ(Θ).
+            rotation_terms.append(stage(inverse_differential(-theta, chart_scalar, u) - deviation))
+
+    def _evaluate(self, t, q, inertia, torque, args, fluid, *, deviation=None, velocity=None):
+        """``(S, N, u)`` of equation (1) at ``(t, q)`` and ``u = S + deviation`` (or ``velocity``)."""
+        dtype = q.dtype
+        force = torque is not None and uses_omega(torque, t, q, jnp.zeros(3, dtype), args)
+        folded = torque is not None and not force
+        flowing = fluid.velocity_gradient is not None
+
+        def torque_velocity(t, q):  # ζ⁻¹ ⊙ τ_b: the part of S an ω-independent torque gives
+            tau = world_torque(torque, t, q, jnp.zeros(3, dtype), args)
+            return quat.rotate(quat.conjugate(q), tau) / fluid.friction
+
+        slow = jnp.zeros(3, dtype)
+        if folded:
+            slow = slow + torque_velocity(t, q)
+        if flowing:
+            flow, flow_rate = body_flow(q, fluid.velocity_gradient, fluid.bretherton)
+            slow = slow + flow
+        u = slow + deviation if velocity is None else velocity
+        forcing = -inertia.solve(jnp.cross(u, inertia.apply(u)))
+        if flowing:
+            forcing = forcing - flow_rate(u)
+        if folded:
+            q_dot = 0.5 * quat.multiply(q, quat.pure(u))
+            forcing = forcing - jax.jvp(torque_velocity, (t, q), (jnp.ones((), jnp.result_type(t)), q_dot))[1]
+        if force:
+            tau = world_torque(torque, t, q, quat.rotate(q, u), args)
+            forcing = forcing + inertia.solve(quat.rotate(quat.conjugate(q), tau))
+        return slow, forcing, u
+
+
+def _plain_forcing(t, q, u, inertia, torque, args):
+    """Euler's equations ``I⁻¹(τ_b − u × I u)``: the forcing without a fluid."""
+    tau_b = None
+    if torque is not None:
+        tau_b = quat.rotate(quat.conjugate(q), world_torque(torque, t, q, quat.rotate(q, u), args))
+    return inertia.angular_acceleration(u, tau_b)
+
+
+def _diagonal(inertia):
+    inertia = body_inertia(inertia)
+    if not inertia.is_diagonal:
+        raise ValueError(
+            "an exponential scheme in a fluid needs the inertia as principal moments (3,) about the "
+            "friction's axes (body axes); a full (3, 3) tensor is not supported."
+        )
+    return inertia
