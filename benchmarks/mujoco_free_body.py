@@ -31,7 +31,7 @@ depends on the step), compiled with `jaxrot.compiler_options`. Both ladders halv
 errors only (the timing fields null, every ladder to its end): errors do not depend on the
 machine's load, timings do.
 
-    python benchmarks/mujoco_free_body.py --json docs/mujoco_free_body_cpu.json   # ~15 min, 2 cores
+    python benchmarks/mujoco_free_body.py --json docs/mujoco_free_body_cpu.json   # ~40 min, 2 cores
     python benchmarks/mujoco_free_body.py --n 10 --t-end 1 --max-steps 1000 --timing-steps 50  # check
 
 Needs ``pip install -e ".[mujoco]"``; without MuJoCo it prints why and exits 0.

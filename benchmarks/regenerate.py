@@ -7,16 +7,17 @@ the machine, the versions, the commit and the date it was measured on
 another in fresh processes, so that nothing else competes for the cores while one is timed.
 
     python benchmarks/regenerate.py --list              # the jobs, their files and rough times
-    python benchmarks/regenerate.py                     # all of them (about 1.5 h on 2 cores)
-    python benchmarks/regenerate.py --quick             # all but the long ones (races, compile, compare)
+    python benchmarks/regenerate.py                     # all of them (about 2 h on 2 cores)
+    python benchmarks/regenerate.py --quick             # all but the long ones (races, compile, MuJoCo...)
     python benchmarks/regenerate.py --only memory,stability
 
 The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machine: the first were
 made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
 ``benchmarks/gpu.sh``. The ``jax_md`` column of the throughput table needs
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
-left out. The ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the repository root with a clean checkout: a results file made from uncommitted
-package or benchmark code carries ``+dirty`` in its commit.
+left out. The ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the
+repository root with a clean checkout: a results file made from uncommitted package or benchmark
+code carries ``+dirty`` in its commit.
 """
 
 import argparse
@@ -139,7 +140,8 @@ JOBS = {
             "--png",
             "docs/mujoco_free_body_cpu.png",
         ),
-        15,
+        40,
+        True,
     ),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),
