@@ -33,7 +33,6 @@ import json
 import math
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -44,6 +43,7 @@ jax.config.update("jax_enable_x64", True)
 import diffrax
 import jax.numpy as jnp
 import numpy as np
+from race import seconds_of_one_run as seconds_of, step_ladder, timed  # noqa: E402 (benchmarks/)
 
 import jaxrot
 from jaxrot import quaternion as quat
@@ -67,27 +67,6 @@ def bodies(scene, n, seed=0):
     """``n`` copies of the scene's spheroid at random orientations, each turning at its overdamped ω."""
     q = quat.normalize(jax.random.normal(jax.random.PRNGKey(seed), (n, 4), dtype=jnp.float64))
     return jaxrot.RotState(q, scene.fluid.angular_velocity(q))
-
-
-def step_ladder(order, start, stop=10**6):
-    """Step counts growing by ``min(√2, 10^(1/(2·order)))`` (half a decade of error a rung)."""
-    growth = min(math.sqrt(2.0), 10.0 ** (1.0 / (2.0 * order)))
-    steps, k = start, 0
-    while steps <= stop:
-        yield steps
-        k += 1
-        steps = max(steps + 1, int(round(start * growth**k)))
-
-
-def seconds_of(compiled, *args):
-    start = time.perf_counter()
-    jax.block_until_ready(compiled(*args))
-    return time.perf_counter() - start
-
-
-def timed(compiled, *args, repeats):
-    out = jax.block_until_ready(compiled(*args))
-    return out, statistics.median(seconds_of(compiled, *args) for _ in range(repeats))
 
 
 def explicit_runner(name, scene):

@@ -335,6 +335,17 @@ def check_save_every(save_every, n_steps: int) -> int:
     return save_every
 
 
+def check_run_times(dt, n_steps, save_every, t0, dtype):
+    """``(dt, n_steps, save_every, t0)`` of a rollout, checked: ``dt`` and ``t0`` cast to ``dtype``."""
+    dt = check_dt(dt).astype(dtype)
+    n_steps = check_count(n_steps, "n_steps", 0)
+    save_every = check_save_every(save_every, n_steps)
+    t0 = jnp.asarray(t0).astype(dtype)
+    if t0.ndim != 0:
+        raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
+    return dt, n_steps, save_every, t0
+
+
 def check_torque(torque):
     if torque is not None and not callable(torque):
         raise ValueError(

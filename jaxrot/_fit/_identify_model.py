@@ -162,16 +162,22 @@ def own_values(own, layout, d):
     return own[:3], own[3:6], values, bias
 
 
-def _parameters(head, own, d, layout):
-    """One experiment's ``(inertia, args, sensors, q₀, ω₀)`` from the head, its block and its data."""
+def _assemble(head, own, q_start, layout):
+    """``(inertia, args, sensors, q₀, ω₀)`` from the head and `own_values`' parts (one experiment's, or
+    all of them with a leading axis ``k``)."""
     inertia, leaves, sensors = shared_values(head, layout)
-    dq, omega0, values, bias = own_values(own, layout, d)
+    dq, omega0, values, bias = own
     for index, value in values.items():
         leaves[index] = value
     if bias is not None:
         sensors = sensors | {"gyro_bias": bias}
-    q0 = quat.multiply(quat.exp(dq), d.q_start)
+    q0 = quat.multiply(quat.exp(dq), q_start)
     return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves), sensors, q0, omega0
+
+
+def _parameters(head, own, d, layout):
+    """One experiment's ``(inertia, args, sensors, q₀, ω₀)`` from the head, its block and its data."""
+    return _assemble(head, own_values(own, layout, d), d.q_start, layout)
 
 
 def _step_args(model, d, user_args, j):
@@ -314,11 +320,6 @@ def unpack(phi, layout, data):
     """All fitted values: ``(inertia (3, 3), args, q₀ (k, 4), ω₀ (k, 3), sensors)``; per-experiment leaves
     of ``args`` and the gyro bias with a leading axis ``k``."""
     head, own = split(phi, layout)
-    inertia, leaves, sensors = shared_values(head, layout)
-    dq, omega0, values, bias = jax.vmap(lambda o, d: own_values(o, layout, d))(own, data)
-    for index, value in values.items():
-        leaves[index] = value
-    if bias is not None:
-        sensors = sensors | {"gyro_bias": bias}
-    q0 = quat.multiply(quat.exp(dq), data.q_start)
-    return inertia, jax.tree_util.tree_unflatten(layout.treedef, leaves), q0, omega0, sensors
+    parts = jax.vmap(lambda o, d: own_values(o, layout, d))(own, data)
+    inertia, args, sensors, q0, omega0 = _assemble(head, parts, data.q_start, layout)
+    return inertia, args, q0, omega0, sensors

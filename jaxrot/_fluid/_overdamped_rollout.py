@@ -13,9 +13,7 @@ from .._particles import PARTICLES, split_per_body, unflatten_trajectory
 from .._state import Trajectory
 from .._validation import (
     QUATERNION_NORM_TOL,
-    check_count,
-    check_dt,
-    check_save_every,
+    check_run_times,
     check_torque,
     declared_dtype,
     float_dtype,
@@ -92,13 +90,8 @@ def overdamped_rollout(
     """
     q, dtype = _check_orientations(q)
     batch_shape = tuple(q.shape[:-1])
-    dt = check_dt(dt).astype(dtype)
-    n_steps = check_count(n_steps, "n_steps", 0)
-    save_every = check_save_every(save_every, n_steps)
+    dt, n_steps, save_every, t0 = check_run_times(dt, n_steps, save_every, t0, dtype)
     check_torque(torque)
-    t0 = jnp.asarray(t0).astype(dtype)
-    if t0.ndim != 0:
-        raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
     scheme = resolve_overdamped(scheme)
     fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
     args, args_axes = split_per_body(args, batch_shape)

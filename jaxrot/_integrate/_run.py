@@ -17,7 +17,7 @@ from .._compile import filter_jit
 from .._inertia import body_inertia
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState, Trajectory
-from .._validation import check_bodies, check_count, check_dt, check_save_every, check_torque, is_concrete
+from .._validation import check_bodies, check_run_times, check_torque, is_concrete
 from ..schemes import resolve_scheme
 from . import _blocking
 from ._drive import check_drive, driven_step, driven_torque
@@ -127,13 +127,8 @@ def prepare_run(
     state, inertia, per_particle = check_bodies(state, inertia, normalize=normalize)
     dtype = state.q.dtype
     batch_shape = tuple(state.q.shape[:-1])
-    dt = check_dt(dt).astype(dtype)
-    n_steps = check_count(n_steps, "n_steps", 0)
-    save_every = check_save_every(save_every, n_steps)
+    dt, n_steps, save_every, t0 = check_run_times(dt, n_steps, save_every, t0, dtype)
     check_torque(torque)
-    t0 = jnp.asarray(t0).astype(dtype)
-    if t0.ndim != 0:
-        raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
     drive, drive_per_particle = check_drive(drive, batch_shape, dtype)
 
     flat_state, inertia = flatten_particles(state, inertia, per_particle)
