@@ -330,21 +330,22 @@ def measure(quick=False):
                 errors.append(float(jnp.max(quat.angle_between(q, reference))))
             floor = 1e-12 if torque is None else 1e-11
             fit = [(dt, e) for dt, e in zip(ladder, errors, strict=True) if e > floor]
-            if len(fit) < 2:
-                raise RuntimeError(f"{label} on {name}: fewer than two rungs above {floor:g} rad: {errors}")
-            slope, intercept = np.polyfit(np.log([d for d, _ in fit]), np.log([e for _, e in fit]), 1)
-            dt_equal = dt_ref * calls / 4
-            # Only within the fitted rungs or above them: below, the fit would run into round-off.
-            equal = float(np.exp(intercept + slope * np.log(dt_equal))) if dt_equal >= fit[-1][0] else None
+            slope, equal = None, None
+            if len(fit) >= 2:  # else the method is at round-off on all but the coarsest rung
+                slope, intercept = np.polyfit(np.log([d for d, _ in fit]), np.log([e for _, e in fit]), 1)
+                dt_equal = dt_ref * calls / 4
+                # Only within the fitted rungs or above them: below, the fit would run into round-off.
+                if dt_equal >= fit[-1][0]:
+                    equal = float(np.exp(intercept + slope * np.log(dt_equal)))
             row["problems"][name] = {
                 "dts": list(ladder),
                 "errors": errors,
-                "fitted_order": float(slope),
+                "fitted_order": None if slope is None else float(slope),
                 "rungs_fitted": len(fit),
                 "dt_ref": dt_ref,
                 "error_at_equal_calls": equal,
             }
-            print(f"{name:12s} {label:52s} order {slope:5.2f}  equal calls {equal or 0:.2e}  "
+            print(f"{name:12s} {label:52s} order {slope or 0:5.2f}  equal calls {equal or 0:.2e}  "
                   + " ".join(f"{e:.2e}" for e in errors), flush=True)  # fmt: skip
         rows.append(row)
     return rows
@@ -370,10 +371,10 @@ def main(argv=None):
     parser.add_argument("--json", default=None, help="write the results file here")
     parser.add_argument("--quick", action="store_true", help="one problem, two rungs: a check that it runs")
     opts = parser.parse_args(argv)
+    machine = machine_info()  # the commit as the run starts
+    machine["mujoco"] = mujoco_available()
     rows = measure(opts.quick)
     if opts.json:
-        machine = machine_info()
-        machine["mujoco"] = mujoco_available()
         with open(opts.json, "w") as f:
             json.dump({"machine": machine, "samples": SAMPLES + 1, "rows": rows}, f, indent=2)
             f.write("\n")
