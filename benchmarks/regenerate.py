@@ -123,6 +123,8 @@ JOBS = {
     "stability": Job(
         ("stability_cpu.json",), ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"), 5
     ),
+    # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
+    "order4": Job(("order4.json",), ("benchmarks/order4.py", "--json", "docs/order4.json"), 9),
     "identify_speed": Job(
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),

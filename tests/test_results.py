@@ -35,6 +35,8 @@ RESULTS = {
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),
+    # The fourth-order Lie-group methods and MuJoCo's RK4: methods, not schemes.
+    "order4.json": (None, "python benchmarks/regenerate.py --only order4"),
     "rotor_choice_cpu.json": (None, "python benchmarks/regenerate.py --only rotor_choice"),
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
     "race_cpu/race_float64.json": ("method", "python benchmarks/regenerate.py --only race64"),

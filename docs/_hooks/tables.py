@@ -490,6 +490,50 @@ def stability_drift_table(docs):
     return _table(header, rows) + _provenance("stability_cpu.json", data["machine"], f" ({steps:.0e} steps)")
 
 
+_ORDER4_PROBLEMS = {"dzhanibekov": "Dzhanibekov flip", "generic": "tumbling body", "heavy_top": "heavy top"}
+
+
+def order4_table(docs, name="order4.json"):
+    """The fourth-order Lie-group methods (`benchmarks/order4.py`): per problem the error at equal
+    torque calls (four per reference step) and, in brackets, the fitted order."""
+    data = _read(docs, name)
+    rows = []
+    for r in data["rows"]:
+        cells = []
+        for key in _ORDER4_PROBLEMS:
+            p = r["problems"].get(key)
+            if p is None:
+                cells.append("–")
+            elif p["error_at_equal_calls"] is None:  # below the fitted rungs: at round-off
+                order = "" if p["fitted_order"] is None else f"; {p['fitted_order']:.2f}"
+                cells.append(f"round-off ({_sig(p['errors'][0], 2)} at dt = {p['dts'][0]:g}{order})")
+            else:
+                cells.append(f"{_sig(p['error_at_equal_calls'], 2)} ({p['fitted_order']:.2f})")
+        rows.append([r["method"], r["torque_calls_per_step"], r["exponentials"], *cells])
+    header = ["method", "torque calls / step", "exponentials / step", *_ORDER4_PROBLEMS.values()]
+    machine = data["machine"]
+    mujoco = machine.get("mujoco") or "absent: its row skipped"
+    return _table(header, rows) + _provenance(name, machine, f" (mujoco {mujoco})")
+
+
+def order4_summary(docs, name="order4.json"):
+    """One sentence: rkmk4 against the world-momentum RKMK4 it replaced, and against MuJoCo's RK4."""
+    data = _read(docs, name)
+    rows = {r["method"]: r["problems"] for r in data["rows"]}
+    ours = rows["rkmk4: RKMK4, body momentum (jaxrot)"]
+    before = rows["RKMK4, world momentum L (jaxrot's rkmk4 before)"]
+    gains = [before[k]["error_at_equal_calls"] / ours[k]["error_at_equal_calls"] for k in _ORDER4_PROBLEMS]
+    text = (
+        f"At equal torque calls `rkmk4`'s errors are {min(gains):.1f}× to {max(gains):.1f}× smaller than "
+        "those of the same tableau on the world angular momentum"
+    )
+    mujoco = rows.get("MuJoCo 4.0 RK4 (free body)")
+    if mujoco:
+        ratios = [mujoco[k]["error_at_equal_calls"] / ours[k]["error_at_equal_calls"] for k in mujoco]
+        text += f", and {min(ratios):.3f}× to {max(ratios):.3f}× MuJoCo 4.0's RK4 on the free bodies"
+    return text + "."
+
+
 def identify_speed_table(docs):
     """`benchmarks/identify_speed.py`'s fits: jaxrot.identify and the diffrax + optimistix rows."""
     data = _read(docs, "identify_speed_cpu.json")
@@ -799,6 +843,8 @@ TABLES = {
     "stability_blow_up_table": stability_blow_up_table,
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
+    "order4_table": order4_table,
+    "order4_summary": order4_summary,
     "rotor_choice_table": rotor_choice_table,
     "throughput_peer_ratios": throughput_peer_ratios,
     "throughput_jax_versions": throughput_jax_versions,
