@@ -96,8 +96,9 @@ class LieRungeKuttaCarry(NamedTuple):
 def _momentum(state, inertia, frame="world"):
     """The angular momentum of ``state`` in ``frame``: world ``L`` or body ``m = I ω_b``."""
     q, omega = state
-    body = inertia.apply(rotate(conjugate(q), omega))
-    return body if frame == "body" else rotate(q, body)
+    if frame == "body":  # q normalised: |q|² = 1 + δ would scale m, and every later ω, by 1 + δ
+        return inertia.apply(rotate(conjugate(normalize(q)), omega))
+    return rotate(q, inertia.apply(rotate(conjugate(q), omega)))
 
 
 MOMENTUM_FRAMES = ("world", "body")
