@@ -475,14 +475,14 @@ def test_float32_keeps_unit_norm_over_ten_thousand_steps(name):
 def test_float32_round_off_of_the_rotor_splittings(name):
     """The tumbling free body, dt = 0.01, 1000 float32 steps, against the exact motion from the same
     (float32-rounded) start: within 1e-4 rad (issue 56: srkn14a was 5e-4 when every rotor flow turned
-    the world ω into the body frame and back, a random walk of the world angular momentum that tilts
-    the precession axis). The bound from the arithmetic: the splittings carry the principal-frame
-    momentum m, rounded once per DMV step (two per rotor flow, fifteen flows per srkn14a step:
-    N = 3e4), an unbiased rounding of standard deviation u/√3 per component (u = 2⁻²⁴); |m| and the
-    energy then random-walk to σ ≈ u √(N/3) ≈ 6e-6 relative at the end, and the phase error they
-    drive, ∫ σ(t) |ω| dt = (2/3) σ |ω| T with |ω| T = 23 rad, is ≈ 9e-5 (measured 3.4e-5; splitting
-    and srkn6b make 1/15 and 7/15 of the roundings). A rounding of q only turns the whole state
-    rigidly, which the free motion does not amplify."""
+    the world ω into the body frame and back, a random walk of |L| and the energy that shifts the
+    body's frequencies). The bound from the arithmetic: the splittings now carry the principal-frame
+    momentum, whose drift no longer drives a phase error (benchmarks/float32.py, part 2: |L| and E
+    drift 6e-7 and 1e-7 over 15 000 flows); what is left is the rounding of q, one quaternion product
+    per DMV step (two per rotor flow, fifteen flows per srkn14a step: N = 3e4) and a normalisation per
+    flow, each turning q by an unbiased O(u) rad (u = 2⁻²⁴). Such turns move the whole state rigidly,
+    which the free motion does not amplify, so they add as a random walk, ~u √(3N) ≈ 2e-5 rad
+    (measured 3.4e-5; splitting and srkn6b round 1/15 and 7/15 as often). 1e-4 leaves a factor 3."""
     state = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), TUMBLING)
     traj = jaxrot.rollout(name, state, MOMENTS.astype(jnp.float32), 0.01, 1000, save_every=1000)
     start = jaxrot.RotState(quat.normalize(state.q.astype(jnp.float64)), state.omega.astype(jnp.float64))
