@@ -490,6 +490,57 @@ def stability_drift_table(docs):
     return _table(header, rows) + _provenance("stability_cpu.json", data["machine"], f" ({steps:.0e} steps)")
 
 
+def _steps(n, total):
+    return f"> {_power_of_ten(total)}" if n is None else str(n)
+
+
+def float32_horizon_table(docs, name="float32_horizon.json"):
+    """Per scheme and problem: the float32 run's angle from its float64 run after 10³ and 10⁵ steps,
+    and the first step (of every tenth) at which it exceeds each threshold (`benchmarks/float32.py`)."""
+    data = _read(docs, name)
+    thresholds = data["thresholds"]
+    problems = list(data["problems"])
+    header = ["scheme"]
+    for problem in problems:
+        header += [f"{problem}: after 10³", "after 10⁵"] + [f"steps to {t:.0e} rad" for t in thresholds]
+    by_scheme = {}
+    for problem in problems:
+        for r in data["problems"][problem]:
+            cells = [
+                "–" if r[f"angle_after_{n}"] is None else _sig(r[f"angle_after_{n}"], 2)
+                for n in (1000, 100_000)
+            ]
+            cells += [_steps(r[f"steps_to_{t:g}"], r["steps"]) for t in thresholds]
+            by_scheme.setdefault(r["scheme"], []).extend(cells)
+    rows = [[f"[`{scheme}`](schemes/{scheme}.md)", *cells] for scheme, cells in by_scheme.items()]
+    return _table(header, rows) + _provenance(name, data["machine"])
+
+
+def float32_rotor_table(docs, name="float32_horizon.json"):
+    """The DMV rotor's two interfaces chained in float32 against float64 (`benchmarks/float32.py`)."""
+    data = _read(docs, name)
+    header = [
+        "rotor interface",
+        "flows",
+        "L direction [rad]",
+        "‖L‖ (relative)",
+        "energy (relative)",
+        "orientation [rad]",
+    ]
+    rows = [
+        [
+            f"`{r['interface']}`",
+            r["calls"],
+            _sig(r["momentum_direction_rad"], 2),
+            _sig(r["momentum_norm_rel"], 2),
+            _sig(r["energy_rel"], 2),
+            _sig(r["orientation_rad"], 2),
+        ]
+        for r in data["rotor"]
+    ]
+    return _table(header, rows)
+
+
 _ORDER4_PROBLEMS = {"dzhanibekov": "Dzhanibekov flip", "generic": "tumbling body", "heavy_top": "heavy top"}
 
 
@@ -844,6 +895,8 @@ TABLES = {
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
     "order4_table": order4_table,
+    "float32_horizon_table": float32_horizon_table,
+    "float32_rotor_table": float32_rotor_table,
     "order4_summary": order4_summary,
     "rotor_choice_table": rotor_choice_table,
     "throughput_peer_ratios": throughput_peer_ratios,
