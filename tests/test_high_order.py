@@ -208,18 +208,20 @@ def test_blanes_moan_coefficients_match_the_published_digits():
 # --- the frame of the momentum (`momentum_frame`) --------------------------------------------
 
 # rkmk4 runs in the body frame (QUICK above); the world form it replaced, and the pairs in the body
-# frame, keep their order too.
+# frame, keep their order too. RKMK-Dopri8 on the body momentum under gravity reaches its slope from
+# below: local fits 7.65 over 5-23 steps, 7.86 over 8-32, 7.91 over 11-32 (errors 4e-9 … 9e-13);
+# under the time-dependent torque it is at round-off from 5 steps.
 FRAMES = [
-    ("rkmk4", "world", "orientation", "diagonal"),
-    pytest.param("rkmk_dopri5", "body", "velocity", "full", marks=pytest.mark.slow),
-    pytest.param("rkmk_dopri8", "body", "orientation", "diagonal", marks=pytest.mark.slow),
+    ("rkmk4", "world", "orientation", "diagonal", None),
+    pytest.param("rkmk_dopri5", "body", "velocity", "full", None, marks=pytest.mark.slow),
+    pytest.param("rkmk_dopri8", "body", "orientation", "diagonal", (11, 16, 23, 32), marks=pytest.mark.slow),
 ]
 
 
-@pytest.mark.parametrize(("name", "frame", "kind", "form"), FRAMES)
-def test_momentum_frame_keeps_the_order(name, frame, kind, form):
+@pytest.mark.parametrize(("name", "frame", "kind", "form", "ladder"), FRAMES)
+def test_momentum_frame_keeps_the_order(name, frame, kind, form, ladder):
     scheme = type(jaxrot.SCHEMES[name])(momentum_frame=frame)
-    assert measured_order(name, kind, form, scheme) == pytest.approx(scheme.order, abs=0.2)
+    assert measured_order(name, kind, form, scheme, ladder) == pytest.approx(scheme.order, abs=0.2)
 
 
 def _free_body_errors(scheme, state, dt, n):
