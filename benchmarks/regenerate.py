@@ -124,6 +124,12 @@ JOBS = {
     "stability": Job(
         ("stability_cpu.json",), ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"), 5
     ),
+    # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
+    "order4": Job(("order4.json",), ("benchmarks/order4.py", "--json", "docs/order4.json"), 9),
+    # Accuracy only: each scheme's float32 run against its float64 run (docs/stability.md).
+    "float32": Job(
+        ("float32_horizon.json",), ("benchmarks/float32.py", "--json", "docs/float32_horizon.json"), 12
+    ),
     "identify_speed": Job(
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),

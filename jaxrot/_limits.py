@@ -9,7 +9,7 @@ LIMITS = {
     "rozmanov": 0.3253,
     "euler": 0.09072,
     "no_squish": 0.242,
-    "rkmk4": 0.7328,
+    "rkmk4": 1.075,
     "rkmk_dopri5": 1.396,
     "rkmk_dopri8": 2.541,
 }

@@ -35,6 +35,9 @@ RESULTS = {
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),
+    # The fourth-order Lie-group methods and MuJoCo's RK4: methods, not schemes.
+    "order4.json": (None, "python benchmarks/regenerate.py --only order4"),
+    "float32_horizon.json": ("scheme", "python benchmarks/regenerate.py --only float32"),
     "rotor_choice_cpu.json": (None, "python benchmarks/regenerate.py --only rotor_choice"),
     "mujoco_free_body_cpu.json": ("method", "python benchmarks/regenerate.py --only mujoco_free_body"),
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
@@ -87,6 +90,8 @@ def _load(name):
         return {"rows": data}
     if "scenes" in data:  # the race: rows per scene
         data = {**data, "rows": [r for scene in data["scenes"].values() for r in scene["rows"]]}
+    if "thresholds" in data:  # float32 horizons: rows per problem
+        data = {**data, "rows": [r for rows in data["problems"].values() for r in rows]}
     if "limits" in data:  # stability: every scheme has rows in each of its tables
         data = {**data, "rows": data["limits"] + data["blow_up"] + data["drift"]}
     return data

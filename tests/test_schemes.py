@@ -163,9 +163,12 @@ FLOAT32_MOMENTUM_DRIFT |= {
     name: 10 * float(jnp.finfo(jnp.float32).eps) * (100_000 * rotor_flows(name)) ** 0.5
     for name in ROTOR_SCHEMES
 }
-# The Lie-group RK schemes carry L itself, unchanged by a torque-free step: what is left is the
-# rounding of L recomputed from (q, ω) for the check, a few ulp (measured 1.3e-6).
-FLOAT32_MOMENTUM_DRIFT |= {"rkmk4": 1e-5, "rkmk_dopri5": 1e-5, "rkmk_dopri8": 1e-5}
+# The Lie-group RK pairs carry L itself, unchanged by a torque-free step: what is left is the
+# rounding of L recomputed from (q, ω) for the check, a few ulp (measured 1.3e-6). rkmk4 carries the
+# body momentum, rounded once a step: a random walk, bounded as the rotors' (measured 1.6e-5; its
+# truncation drift, 1e-7 over these 10^5 steps in float64, is below).
+FLOAT32_MOMENTUM_DRIFT |= {"rkmk_dopri5": 1e-5, "rkmk_dopri8": 1e-5}
+FLOAT32_MOMENTUM_DRIFT["rkmk4"] = 10 * float(jnp.finfo(jnp.float32).eps) * 100_000**0.5
 
 
 @pytest.mark.parametrize("name", scheme_params(n for n in SCHEME_NAMES if jaxrot.SCHEMES[n].order >= 2))

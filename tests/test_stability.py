@@ -45,12 +45,15 @@ LIMITS = {
     ("needle", "float64"): {"zhao": 0.291, "rozmanov": 0.00272, "euler": 0.07092, "no_squish": 0.01228},
     ("needle", "float32"): {"zhao": 0.2658, "rozmanov": 0.002677, "euler": 0.07092, "no_squish": 0.01261},
 }
-# The Lie-group RK schemes integrate the angular momentum too: on the needle they share the
-# 1/I₁ amplification of orientation errors; on the generic body their order shows.
-LIMITS[("generic", "float64")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
-LIMITS[("generic", "float32")] |= {"rkmk4": 0.7328, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
-LIMITS[("needle", "float64")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
-LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
+# The Lie-group RK pairs integrate the world angular momentum too: on the needle they share the
+# 1/I₁ amplification of orientation errors; on the generic body their order shows. rkmk4 integrates
+# the body momentum (Euler's equations), which no orientation error feeds: on the needle its limit
+# is that of the generic body in float64 (float32: the needle's spin, 1e6 times the others' rate of
+# change, rounds at 0.4).
+LIMITS[("generic", "float64")] |= {"rkmk4": 1.075, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
+LIMITS[("generic", "float32")] |= {"rkmk4": 1.075, "rkmk_dopri5": 1.396, "rkmk_dopri8": 2.541}
+LIMITS[("needle", "float64")] |= {"rkmk4": 0.9152, "rkmk_dopri5": 0.004467, "rkmk_dopri8": 0.008366}
+LIMITS[("needle", "float32")] |= {"rkmk4": 0.4052, "rkmk_dopri5": 0.00439, "rkmk_dopri8": 0.006026}
 # The splittings, torque-free, are their DMV10 rotor (jaxrot._free_body._rotor): exact to round-off on the
 # generic body at any |ω|Δt up to 10 (the rotor takes ⌈|ω|Δt / 0.2⌉ DMV steps per flow: no limit in
 # the table), and on the needle up to where the modified moments' cancellation passes the rotor's
@@ -58,7 +61,7 @@ LIMITS[("needle", "float32")] |= {"rkmk4": 0.003199, "rkmk_dopri5": 0.00439, "rk
 LIMITS[("needle", "float64")] |= {"splitting": 0.03335, "srkn6b": 0.05515, "srkn14a": 0.1062}
 LIMITS[("needle", "float32")] |= {"splitting": 0.0213, "srkn6b": 0.03517, "srkn14a": 0.06773}
 # dexp⁻¹ has a pole at |Θ| = 2π: the Lie-group RK stages (|Θ_i| ≈ c_i |ω|Δt) stay finite below it,
-# and are NaN at 10 rad per step (measured finite up to 4.6 for rkmk4).
+# and are NaN at 10 rad per step; rkmk4's explicit RK4 on Euler's equations overflows from 3.98.
 FINITE_UP_TO = {"zhao": 3.0, "euler": 3.0}
 FINITE_UP_TO |= {"rkmk4": 3.0, "rkmk_dopri5": 3.0, "rkmk_dopri8": 3.0}
 # These are NaN soon above their accuracy limit, where the error per step is already past the
@@ -74,6 +77,12 @@ BODIES = {"generic": stability.DEFAULT_MOMENTS, "needle": NEEDLE}
 # The band the error crosses 1e-3 in. Float32 on the needle is noisy: round-off in ω × Iω over
 # I₁ = 1e-6 is ~6e-2 rad/s, so the error per step wobbles by ~±30% from one |ω|Δt to the next.
 BAND = {("needle", "float32"): 0.25}
+# rkmk4 carries the body momentum: on the needle in float32 m₁ = I₁ ω₁ rounds at u |ω₁|, and from
+# 0.25 to 0.6 rad per step its error per step is round-off, 1e-4 to 3e-3 depending on how XLA
+# vectorises the batch of rungs (the same |ω|Δt measured 1.3e-4 and 2.9e-3 in two batches): it
+# crosses 1e-3 somewhere there. Checked below at half the first crossing and above at 2.5 times it
+# (1 rad per step: 1e-2, far above the noise).
+AROUND = {("rkmk4", "needle", "float32"): (0.5, 2.5)}
 # 39 rungs from 1e-12 to 10 rad per step, plus two just around the limit: 41 in all, the size
 # max_stable_rotation_per_step uses for [1e-3, 10], so its compiled code is shared.
 LADDER = np.logspace(-12, 1, 39)
@@ -99,7 +108,8 @@ def test_rotation_per_step_from_1e_minus_12_to_10(name, dtype, body):
     if body == "needle" and name in ROTOR_SCHEMES:
         band = ROTOR_NEEDLE_BAND
         trusted = (1 - band) * limit
-    around = [5.0, 10.0] if limit is None else [(1 - band) * limit, (1 + band) * limit]
+    low, high = AROUND.get((name, body, dtype), (1 - band, 1 + band))
+    around = [5.0, 10.0] if limit is None else [low * limit, high * limit]
     x = np.concatenate([LADDER, around])
     result = stability.rotation_ladder(scheme, x, dtype=DTYPES[dtype], inertia=BODIES[body])
     finite_up_to = trusted if (name, body) in NAN_ABOVE_LIMIT else FINITE_UP_TO.get(name, np.inf)
@@ -479,11 +489,14 @@ LONG_RUN = {
     ("splitting", "float32"): (NORM["float32"], WALK["float32"], WALK["float32"]),  # [6.6e-8, 6.4e-5, 1.2e-4]
     # Lie-group RK: they carry L, unchanged by a free step; the diagnostic rebuilds it, as for rozmanov.
     # Float32 energy: round-off of 10^6 steps, at 5× the measured (the ISA moves it by up to ~1.5×).
-    ("rkmk4", "float64"): (NORM["float64"], 2e-8, L_REBUILT["float64"]),  # [2.2e-16, 8.5e-9, 3.1e-15]
+    # rkmk4 integrates the body momentum: |L| drifts by its truncation error, at most linearly in
+    # time (2e-9 relative over t = 20 at |ω|Δt = 0.02 in tests/test_high_order.py: 1e-7 over t = 10³).
+    ("rkmk4", "float64"): (NORM["float64"], 2e-8, 1e-7),  # 10^5: [2.2e-16, 2.5e-9, 2.7e-9]
     ("rkmk_dopri5", "float64"): (NORM["float64"], 6e-10, L_REBUILT["float64"]),  # [.., 2.7e-10, 3.4e-15]
     # Dopri8's energy error is round-off (its truncation is far below): bounded as for splitting.
     ("rkmk_dopri8", "float64"): (NORM["float64"], SPLIT["float64"], L_REBUILT["float64"]),  # [1.7e-14, ..]
-    ("rkmk4", "float32"): (NORM["float32"], 1e-3, L_REBUILT["float32"]),  # 10^6: [9.2e-8, 1.6e-4, 1.7e-6]
+    # rkmk4's body momentum is rounded each step: a random walk, 10 √n eps over the 10^6 steps.
+    ("rkmk4", "float32"): (NORM["float32"], 1e-3, 10 * 1000 * EPS["float32"]),  # [1.1e-7, 1.0e-4, 1.8e-4]
     ("rkmk_dopri5", "float32"): (NORM["float32"], 1e-3, L_REBUILT["float32"]),  # [9.7e-8, 1.9e-4, 1.4e-6]
     ("rkmk_dopri8", "float32"): (NORM["float32"], 1e-3, L_REBUILT["float32"]),  # [9.0e-8, 1.9e-4, 1.5e-6]
     # RKN splittings: their rotor's round-off is a random walk with a few-ulp correction per call

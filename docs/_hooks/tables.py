@@ -490,6 +490,101 @@ def stability_drift_table(docs):
     return _table(header, rows) + _provenance("stability_cpu.json", data["machine"], f" ({steps:.0e} steps)")
 
 
+def _steps(n, total):
+    return f"> {_power_of_ten(total)}" if n is None else str(n)
+
+
+def float32_horizon_table(docs, name="float32_horizon.json"):
+    """Per scheme and problem: the float32 run's angle from its float64 run after 10³ and 10⁵ steps,
+    and the first step (of every tenth) at which it exceeds each threshold (`benchmarks/float32.py`)."""
+    data = _read(docs, name)
+    thresholds = data["thresholds"]
+    problems = list(data["problems"])
+    header = ["scheme"]
+    for problem in problems:
+        header += [f"{problem}: after 10³", "after 10⁵"] + [f"steps to {t:.0e} rad" for t in thresholds]
+    by_scheme = {}
+    for problem in problems:
+        for r in data["problems"][problem]:
+            cells = [
+                "–" if r[f"angle_after_{n}"] is None else _sig(r[f"angle_after_{n}"], 2)
+                for n in (1000, 100_000)
+            ]
+            cells += [_steps(r[f"steps_to_{t:g}"], r["steps"]) for t in thresholds]
+            by_scheme.setdefault(r["scheme"], []).extend(cells)
+    rows = [[f"[`{scheme}`](schemes/{scheme}.md)", *cells] for scheme, cells in by_scheme.items()]
+    return _table(header, rows) + _provenance(name, data["machine"])
+
+
+def float32_rotor_table(docs, name="float32_horizon.json"):
+    """The DMV rotor's two interfaces chained in float32 against float64 (`benchmarks/float32.py`)."""
+    data = _read(docs, name)
+    header = [
+        "rotor interface",
+        "flows",
+        "L direction [rad]",
+        "‖L‖ (relative)",
+        "energy (relative)",
+        "orientation [rad]",
+    ]
+    rows = [
+        [
+            f"`{r['interface']}`",
+            r["calls"],
+            _sig(r["momentum_direction_rad"], 2),
+            _sig(r["momentum_norm_rel"], 2),
+            _sig(r["energy_rel"], 2),
+            _sig(r["orientation_rad"], 2),
+        ]
+        for r in data["rotor"]
+    ]
+    return _table(header, rows)
+
+
+_ORDER4_PROBLEMS = {"dzhanibekov": "Dzhanibekov flip", "generic": "tumbling body", "heavy_top": "heavy top"}
+
+
+def order4_table(docs, name="order4.json"):
+    """The fourth-order Lie-group methods (`benchmarks/order4.py`): per problem the error at equal
+    torque calls (four per reference step) and, in brackets, the fitted order."""
+    data = _read(docs, name)
+    rows = []
+    for r in data["rows"]:
+        cells = []
+        for key in _ORDER4_PROBLEMS:
+            p = r["problems"].get(key)
+            if p is None:
+                cells.append("–")
+            elif p["error_at_equal_calls"] is None:  # below the fitted rungs: at round-off
+                order = "" if p["fitted_order"] is None else f"; {p['fitted_order']:.2f}"
+                cells.append(f"round-off ({_sig(p['errors'][0], 2)} at dt = {p['dts'][0]:g}{order})")
+            else:
+                cells.append(f"{_sig(p['error_at_equal_calls'], 2)} ({p['fitted_order']:.2f})")
+        rows.append([r["method"], r["torque_calls_per_step"], r["exponentials"], *cells])
+    header = ["method", "torque calls / step", "exponentials / step", *_ORDER4_PROBLEMS.values()]
+    machine = data["machine"]
+    mujoco = machine.get("mujoco") or "absent: its row skipped"
+    return _table(header, rows) + _provenance(name, machine, f" (mujoco {mujoco})")
+
+
+def order4_summary(docs, name="order4.json"):
+    """One sentence: rkmk4 against the world-momentum RKMK4 it replaced, and against MuJoCo's RK4."""
+    data = _read(docs, name)
+    rows = {r["method"]: r["problems"] for r in data["rows"]}
+    ours = rows["rkmk4: RKMK4, body momentum (jaxrot)"]
+    before = rows["RKMK4, world momentum L (jaxrot's rkmk4 before)"]
+    gains = [before[k]["error_at_equal_calls"] / ours[k]["error_at_equal_calls"] for k in _ORDER4_PROBLEMS]
+    text = (
+        f"At equal torque calls `rkmk4`'s errors are {min(gains):.1f}× to {max(gains):.1f}× smaller than "
+        "those of the same tableau on the world angular momentum"
+    )
+    mujoco = rows.get("MuJoCo 4.0 RK4 (free body)")
+    if mujoco:
+        ratios = [mujoco[k]["error_at_equal_calls"] / ours[k]["error_at_equal_calls"] for k in mujoco]
+        text += f", and {min(ratios):.3f}× to {max(ratios):.3f}× MuJoCo 4.0's RK4 on the free bodies"
+    return text + "."
+
+
 def identify_speed_table(docs):
     """`benchmarks/identify_speed.py`'s fits: jaxrot.identify and the diffrax + optimistix rows."""
     data = _read(docs, "identify_speed_cpu.json")
@@ -986,6 +1081,10 @@ TABLES = {
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
     "identify_sysid_table": identify_sysid_table,
+    "order4_table": order4_table,
+    "float32_horizon_table": float32_horizon_table,
+    "float32_rotor_table": float32_rotor_table,
+    "order4_summary": order4_summary,
     "rotor_choice_table": rotor_choice_table,
     "mujoco_free_body_accuracy": mujoco_free_body_accuracy,
     "mujoco_free_body_speed": mujoco_free_body_speed,

@@ -133,6 +133,14 @@ class AdaptiveLieSolver(SchemeSolver, diffrax.AbstractAdaptiveSolver):
 
     scheme: AbstractLieRungeKutta
 
+    def __check_init__(self):
+        # The dense output interpolates the world L and the reused last stage is a world torque.
+        if self.scheme.momentum_frame != "world":
+            raise ValueError(
+                f"the adaptive solver of {self.scheme.name!r} needs momentum_frame='world'; got "
+                f"{self.scheme.momentum_frame!r}. Build the scheme with momentum_frame='world'."
+            )
+
     @property
     def interpolation_cls(self):  # pyright: ignore
         algebra = self.scheme.dense_output

@@ -89,7 +89,7 @@ from jax import lax
 from .._fusion import stage, stage_stacked, tracing_for_cpu
 
 
-__all__ = ["free_rotor"]
+__all__ = ["free_rotor", "free_rotor_momentum"]
 
 # DMV10 steps per call. By default each body takes its own number, n = ceil(|ω| |t| / a) with the
 # largest angle per DMV step a below, at least 2 and at most _MAX_SUBSTEPS. Two is the least: the
@@ -552,68 +552,10 @@ def substeps_for(angle, dtype):
     )
 
 
-# Jitted so that an eager call compiles once, not primitive by primitive (inlined under an outer jit).
-@functools.partial(jax.jit, static_argnames="substeps")
-def free_rotor(q_principal, omega, moments, t, *, substeps=None):
-    """Torque-free motion of one body over a time ``t``, in its principal frame: DMV10, near-exact.
-
-    The contract of `jaxrot.analytic.free_motion`, at a fraction of its cost (see the module
-    docstring for the method, the measured error and the limits).
-
-    Args:
-        q_principal: ``(4,)`` unit quaternion, scalar first, principal frame → world
-            (renormalised on the way in).
-        omega: ``(3,)`` world-frame angular velocity (rad per unit time).
-        moments: ``(3,)`` principal moments of inertia (mass × length²), ascending as
-            `jaxrot.analytic.principal_axes` returns them (any order works here).
-        t: scalar time elapsed, any sign (``t = 0`` returns the input, renormalised).
-        substeps: DMV10 steps covering ``t`` (a Python int), or None (default): each body
-            takes ``ceil(|ω| |t| / a)`` steps, at least 2 and at most 64, with ``a = 0.2`` rad
-            in float64 and 0.5 in float32 (`substeps_for`; traced for a GPU, the steps past
-            the first two rounded up to a multiple of 4, `LOOP_BATCH`). A fixed count is valid while
-            ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
-
-    Returns:
-        ``(q_principal(t), omega(t))``, shapes ``(4,)`` and ``(3,)``, in the dtype of
-        ``q_principal``. Leading axes of the arguments broadcast, as under `jax.vmap`.
-
-    Example:
-        >>> import jax.numpy as jnp
-        >>> from jaxrot import quaternion as quat
-        >>> from jaxrot._free_body._rotor import free_rotor
-        >>> q0, w0 = jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, 1.0, 0.2])
-        >>> moments = jnp.array([1.0, 2.0, 3.0])
-        >>> q1, w1 = free_rotor(q0, w0, moments, 0.4)  # exact: ω(0.4) = (0.221306, 1.017589, 0.180718)
-        >>> print(q1.shape, w1.shape, ", ".join(f"{x:.6f}" for x in w1))
-        (4,) (3,) 0.221306, 1.017589, 0.180718
-        >>> energy = lambda q, w: jnp.sum(moments * quat.rotate(quat.conjugate(q), w) ** 2)
-        >>> print(bool(jnp.abs(energy(q1, w1) / energy(q0, w0) - 1) < 1e-6))
-        True
-        >>> q2, w2 = free_rotor(q0, jnp.array([300.0, -230.0, 80.0]), jnp.ones(3), 0.03)  # 11.6 rad
-        >>> print(bool(jnp.all(jnp.isfinite(q2))))
-        True
-    """
-    dtype = jnp.asarray(q_principal).dtype
-    if substeps is not None and (not isinstance(substeps, int) or substeps < 1):
-        raise ValueError(f"`substeps` must be None or a Python int >= 1; got {substeps!r}.")
-    q_principal = jnp.asarray(q_principal, dtype)
-    omega = jnp.asarray(omega).astype(dtype)
-    moments = jnp.asarray(moments).astype(dtype)
-    t = jnp.asarray(t).astype(dtype)
-    fixed = lax.stop_gradient
-
-    inertia = tuple(moments[..., k] for k in range(3))
-    inverse = tuple(1 / i for i in inertia)
-    q = tuple(q_principal[..., k] for k in range(4))
-    norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    q = tuple(c * norm for c in q)
-    w_body = _turn(q, _unit_residual(q), tuple(omega[..., k] for k in range(3)), inverse=True)
-    targets = _invariants(w_body, inertia)
-    m = tuple(i * w for i, w in zip(inertia, w_body, strict=True))
-    # |ω| from the world frame (a rotation keeps it): from w_body, XLA:CPU recomputed the rotation
-    # in one more pass over the bodies, for the step count alone.
-    w_world = tuple(omega[..., k] for k in range(3))
-    total_angle = fixed(jnp.abs(t) * jnp.sqrt(w_world[0] ** 2 + w_world[1] ** 2 + w_world[2] ** 2))
+def _dmv_flow(q, m, inertia, inverse, targets, total_angle, t, substeps, dtype):
+    """The DMV10 flow over ``t`` of one body's unit ``q`` (4 components, principal → world) and body
+    momentum ``m`` (3): ``(q, m, valid, targets)``, ``q`` normalised, ``targets`` (``(|m|², 2E)``)
+    behind the flow's first stage barrier; ``valid`` False where the result must be NaN."""
     if substeps is None:
         # n steps of t/n for the momentum m are 2 steps' worth of t/2 for the momentum (2/n) m, then
         # scaled back: the flow, and the DMV map (a function of h m), are invariant under h → h/k,
@@ -680,7 +622,72 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
         m = tuple(mi / scale for mi in m)
 
     norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return tuple(c * norm for c in q), m, valid, targets
+
+
+# Jitted so that an eager call compiles once, not primitive by primitive (inlined under an outer jit).
+@functools.partial(jax.jit, static_argnames="substeps")
+def free_rotor(q_principal, omega, moments, t, *, substeps=None):
+    """Torque-free motion of one body over a time ``t``, in its principal frame: DMV10, near-exact.
+
+    The contract of `jaxrot.analytic.free_motion`, at a fraction of its cost (see the module
+    docstring for the method, the measured error and the limits).
+
+    Args:
+        q_principal: ``(4,)`` unit quaternion, scalar first, principal frame → world
+            (renormalised on the way in).
+        omega: ``(3,)`` world-frame angular velocity (rad per unit time).
+        moments: ``(3,)`` principal moments of inertia (mass × length²), ascending as
+            `jaxrot.analytic.principal_axes` returns them (any order works here).
+        t: scalar time elapsed, any sign (``t = 0`` returns the input, renormalised).
+        substeps: DMV10 steps covering ``t`` (a Python int), or None (default): each body
+            takes ``ceil(|ω| |t| / a)`` steps, at least 2 and at most 64, with ``a = 0.2`` rad
+            in float64 and 0.5 in float32 (`substeps_for`; traced for a GPU, the steps past
+            the first two rounded up to a multiple of 4, `LOOP_BATCH`). A fixed count is valid while
+            ``|ω| |t| / substeps <= 1``; beyond, the result is NaN.
+
+    Returns:
+        ``(q_principal(t), omega(t))``, shapes ``(4,)`` and ``(3,)``, in the dtype of
+        ``q_principal``. Leading axes of the arguments broadcast, as under `jax.vmap`.
+
+    Example:
+        >>> import jax.numpy as jnp
+        >>> from jaxrot import quaternion as quat
+        >>> from jaxrot._free_body._rotor import free_rotor
+        >>> q0, w0 = jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.3, 1.0, 0.2])
+        >>> moments = jnp.array([1.0, 2.0, 3.0])
+        >>> q1, w1 = free_rotor(q0, w0, moments, 0.4)  # exact: ω(0.4) = (0.221306, 1.017589, 0.180718)
+        >>> print(q1.shape, w1.shape, ", ".join(f"{x:.6f}" for x in w1))
+        (4,) (3,) 0.221306, 1.017589, 0.180718
+        >>> energy = lambda q, w: jnp.sum(moments * quat.rotate(quat.conjugate(q), w) ** 2)
+        >>> print(bool(jnp.abs(energy(q1, w1) / energy(q0, w0) - 1) < 1e-6))
+        True
+        >>> q2, w2 = free_rotor(q0, jnp.array([300.0, -230.0, 80.0]), jnp.ones(3), 0.03)  # 11.6 rad
+        >>> print(bool(jnp.all(jnp.isfinite(q2))))
+        True
+    """
+    dtype = jnp.asarray(q_principal).dtype
+    if substeps is not None and (not isinstance(substeps, int) or substeps < 1):
+        raise ValueError(f"`substeps` must be None or a Python int >= 1; got {substeps!r}.")
+    q_principal = jnp.asarray(q_principal, dtype)
+    omega = jnp.asarray(omega).astype(dtype)
+    moments = jnp.asarray(moments).astype(dtype)
+    t = jnp.asarray(t).astype(dtype)
+    fixed = lax.stop_gradient
+
+    inertia = tuple(moments[..., k] for k in range(3))
+    inverse = tuple(1 / i for i in inertia)
+    q = tuple(q_principal[..., k] for k in range(4))
+    norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     q = tuple(c * norm for c in q)
+    w_body = _turn(q, _unit_residual(q), tuple(omega[..., k] for k in range(3)), inverse=True)
+    targets = _invariants(w_body, inertia)
+    m = tuple(i * w for i, w in zip(inertia, w_body, strict=True))
+    # |ω| from the world frame (a rotation keeps it): from w_body, XLA:CPU recomputed the rotation
+    # in one more pass over the bodies, for the step count alone.
+    w_world = tuple(omega[..., k] for k in range(3))
+    total_angle = fixed(jnp.abs(t) * jnp.sqrt(w_world[0] ** 2 + w_world[1] ** 2 + w_world[2] ** 2))
+    q, m, valid, targets = _dmv_flow(q, m, inertia, inverse, targets, total_angle, t, substeps, dtype)
     residual = _unit_residual(q)
     omega_t = _turn(q, residual, tuple(mi * vi for mi, vi in zip(m, inverse, strict=True)))
     staged = stage(*q, residual, *omega_t)
@@ -692,3 +699,58 @@ def free_rotor(q_principal, omega, moments, t, *, substeps=None):
     q_out = jnp.where(valid[..., None], jnp.stack(q, axis=-1), nan)
     omega_out = jnp.where(valid[..., None], jnp.stack(omega_t, axis=-1), nan)
     return q_out, omega_out
+
+
+@functools.partial(jax.jit, static_argnames="substeps")
+def free_rotor_momentum(q_principal, momentum, moments, t, *, substeps=None):
+    """`free_rotor` on the principal-frame angular momentum ``m = I ω_p`` instead of the world ``ω``.
+
+    No frame conversion: the flow of ``(q, m)`` itself, so a scheme that carries ``m`` between
+    calls adds no conversion round-off to it (`free_rotor` turns ``ω`` into the body frame and back
+    in each call, each a rounding of ``|ω|`` relative size: in float32 a random walk of the
+    world angular momentum that tilts the precession axis). Round-off left: that of the DMV steps,
+    whose momentum update is of size ``|ω| t |m|``, and of ``q``, which only rotates the whole
+    state rigidly (a symmetry of the free motion: it does not grow).
+
+    Args:
+        q_principal: ``(4,)`` unit quaternion, principal frame → world (renormalised on the way in).
+        momentum: ``(3,)`` angular momentum in the principal frame (``I ω_p``).
+        moments, t, substeps: as for `free_rotor`.
+
+    Returns:
+        ``(q_principal(t), momentum(t))``, shapes ``(4,)`` and ``(3,)``; NaN where `free_rotor`'s
+        would be.
+
+    Example:
+        >>> import jax.numpy as jnp
+        >>> from jaxrot import quaternion as quat
+        >>> from jaxrot._free_body._rotor import free_rotor, free_rotor_momentum
+        >>> q0, w0 = jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 1.0, 0.2])  # q0 = 1: body = world
+        >>> moments = jnp.array([1.0, 2.0, 3.0])
+        >>> q1, m1 = free_rotor_momentum(q0, moments * w0, moments, 0.4)
+        >>> q2, w2 = free_rotor(q0, w0, moments, 0.4)
+        >>> w2_body = quat.rotate(quat.conjugate(q2), w2)
+        >>> print(bool(jnp.allclose(q1, q2)), bool(jnp.allclose(m1 / moments, w2_body)))
+        True True
+    """
+    dtype = jnp.asarray(q_principal).dtype
+    if substeps is not None and (not isinstance(substeps, int) or substeps < 1):
+        raise ValueError(f"`substeps` must be None or a Python int >= 1; got {substeps!r}.")
+    moments = jnp.asarray(moments).astype(dtype)
+    momentum = jnp.asarray(momentum).astype(dtype)
+    t = jnp.asarray(t).astype(dtype)
+    inertia = tuple(moments[..., k] for k in range(3))
+    inverse = tuple(1 / i for i in inertia)
+    q = tuple(jnp.asarray(q_principal, dtype)[..., k] for k in range(4))
+    norm = lax.rsqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q = tuple(c * norm for c in q)
+    m = tuple(momentum[..., k] for k in range(3))
+    w = tuple(mi * v for mi, v in zip(m, inverse, strict=True))
+    targets = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2], m[0] * w[0] + m[1] * w[1] + m[2] * w[2])
+    total_angle = lax.stop_gradient(jnp.abs(t) * jnp.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]))
+    q, m, valid, _ = _dmv_flow(q, m, inertia, inverse, targets, total_angle, t, substeps, dtype)
+    nan = jnp.asarray(jnp.nan, dtype)
+    return (
+        jnp.where(valid[..., None], jnp.stack(q, axis=-1), nan),
+        jnp.where(valid[..., None], jnp.stack(m, axis=-1), nan),
+    )

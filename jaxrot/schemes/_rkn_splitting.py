@@ -21,7 +21,7 @@ from jax.extend import core as jex_core
 from .. import quaternion as quat
 from .._state import RotState
 from ._base import world_torque
-from .splitting import AbstractRotorSplitting, SplittingCarry, _kick
+from .splitting import AbstractRotorSplitting, SplittingCarry, _kick, _world_omega
 
 
 def uses_omega(torque, t, q, omega, args) -> bool:
@@ -125,25 +125,28 @@ class AbstractRKNSplitting(AbstractRotorSplitting):
         return self.principal_carry(state, inertia, tau)
 
     def step(self, carry, t, dt, inertia, torque, args):
-        (q, omega), tau, moments, principal = carry
+        (q, _), tau, moments, principal, momentum = carry
         dtype = q.dtype
         to_body = quat.conjugate(principal)
         kicks, rotors = np.asarray(self.kick_weights), np.asarray(self.rotor_weights)
 
-        def rotor(q_p, omega, weight):
-            return self.flow(q_p, omega, moments, weight * dt)
+        # The rotors and kicks advance the principal-frame momentum (`SplittingCarry.momentum`); the
+        # world ω is formed for the torque's argument and the output only.
+        def rotor(q_p, momentum, weight):
+            return self.flow(q_p, momentum, moments, weight * dt)
 
-        def kick(q_p, omega, weight, elapsed):
+        def kick(q_p, momentum, weight, elapsed):
+            omega = _world_omega(q_p, momentum, moments)
             tau = world_torque(torque, t + elapsed * dt, quat.multiply(q_p, to_body), omega, args)
-            return omega + _kick(q_p, moments, (weight * dt) * tau), tau
+            return momentum + _kick(q_p, (weight * dt) * tau), tau
 
         # One (rotor, kick) pair per scan iteration: the step compiles one rotor, not fifteen.
         q_p = quat.multiply(q, principal)
         if tau is None and torque is not None:
-            tau = jnp.zeros_like(omega)
+            tau = jnp.zeros_like(momentum)
         if self.kick_first:
             if torque is not None:
-                omega = omega + _kick(q_p, moments, (float(kicks[0]) * dt) * tau)
+                momentum = momentum + _kick(q_p, (float(kicks[0]) * dt) * tau)
             # Row i: rotor a_i, then kick b_{i+1} at the fraction of the step elapsed (time advances
             # in the rotor flows only).
             rows = np.stack([rotors, kicks[1:], np.cumsum(rotors), np.ones_like(rotors)], axis=1)
@@ -158,22 +161,23 @@ class AbstractRKNSplitting(AbstractRotorSplitting):
             )
 
         def pair(loop, row):
-            q_p, omega, tau = loop
-            q_p, omega = rotor(q_p, omega, row[0])
+            q_p, momentum, tau = loop
+            q_p, momentum = rotor(q_p, momentum, row[0])
             if torque is not None:
                 if self.kick_first:
-                    omega, tau = kick(q_p, omega, row[1], row[2])
+                    momentum, tau = kick(q_p, momentum, row[1], row[2])
                 else:
-                    omega, tau = jax.lax.cond(
+                    momentum, tau = jax.lax.cond(
                         row[3] > 0,
-                        lambda q_p, omega, tau: kick(q_p, omega, row[1], row[2]),
-                        lambda q_p, omega, tau: (omega, tau),
+                        lambda q_p, momentum, tau: kick(q_p, momentum, row[1], row[2]),
+                        lambda q_p, momentum, tau: (momentum, tau),
                         q_p,
-                        omega,
+                        momentum,
                         tau,
                     )
-            return (q_p, omega, tau), None
+            return (q_p, momentum, tau), None
 
-        (q_p, omega, tau), _ = jax.lax.scan(pair, (q_p, omega, tau), jnp.asarray(rows, dtype))
+        (q_p, momentum, tau), _ = jax.lax.scan(pair, (q_p, momentum, tau), jnp.asarray(rows, dtype))
         q1 = quat.multiply(q_p, to_body)
-        return SplittingCarry(RotState(q1, omega), tau if self.kick_first else None, moments, principal)
+        state = RotState(q1, _world_omega(q_p, momentum, moments))
+        return SplittingCarry(state, tau if self.kick_first else None, moments, principal, momentum)

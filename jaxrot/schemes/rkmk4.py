@@ -3,6 +3,7 @@
 from typing import ClassVar
 
 import diffrax
+import equinox as eqx
 import numpy as np
 
 from ._lie_runge_kutta import AbstractLieRungeKutta
@@ -20,6 +21,16 @@ _RK4 = diffrax.ButcherTableau(
 class RKMK4(AbstractLieRungeKutta):
     """Runge–Kutta–Munthe-Kaas with the classical RK4 tableau: order 4, four torque calls per step.
 
+    The tableau advances the **body** angular momentum ``m = I ω_b`` (Euler's equations) beside the
+    rotation (``momentum_frame="body"``; `jaxrot.schemes.AbstractLieRungeKutta`), the form of
+    MuJoCo 4.0's ``RK4`` integrator on a free joint, which it reproduces to round-off. A free
+    body's ``m`` then evolves independently of the stage orientations; measured
+    (``benchmarks/order4.py``, errors at equal steps), 2.6× (intermediate-axis flip), 8.4×
+    (tumbling body) and 11× (heavy top) smaller errors than with the world momentum ``L``, whose
+    stage velocities ``R_i I⁻¹ R_iᵀ L`` inherit the stage orientations' errors. World ``L`` is then
+    kept to the method's order rather than exactly; ``RKMK4(momentum_frame="world")`` keeps it
+    exactly (the scheme before).
+
     Reference: H. Munthe-Kaas, BIT 38, 92–111 (1998); Kutta (1901).
 
     Example:
@@ -33,3 +44,4 @@ class RKMK4(AbstractLieRungeKutta):
     name: ClassVar[str] = "rkmk4"
     order: ClassVar[int] = 4
     tableau: ClassVar[diffrax.ButcherTableau] = _RK4
+    momentum_frame: str = eqx.field(default="body", static=True)
