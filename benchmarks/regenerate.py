@@ -156,6 +156,11 @@ JOBS = {
     ),
     # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
     "fluid_orders": Job(("fluid_orders.json",), ("benchmarks/fluid_orders.py",), 12),
+    "overdamped_cost": Job(
+        ("overdamped_cost_cpu.json",),
+        ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),
+        2,
+    ),
     "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 40, True),
 }
 

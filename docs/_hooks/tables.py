@@ -997,6 +997,20 @@ def _fluid_race(docs, name):
     return json.loads(path.read_text()) if path.exists() else None
 
 
+def overdamped_cost_table(docs, name="overdamped_cost_cpu.json"):
+    """`benchmarks/overdamped_cost.py`: each overdamped scheme's cost per body-step against ``zhao``'s."""
+    path = Path(docs) / name
+    if not path.exists():
+        return f"*Not measured yet: `python benchmarks/overdamped_cost.py --json docs/{name}`.*"
+    data = _read(docs, name)
+    header = ["scheme", "bodies", "ns per body-step", "× zhao"]
+    rows = [
+        [r["scheme"], f"{r['bodies']}", f"{r['ns_per_body_step']:.1f}", f"{r['vs_zhao']:.2f}"]
+        for r in data["rows"]
+    ]
+    return _table(header, rows) + _provenance(name, data["machine"], f" ({data['steps']} steps)")
+
+
 def fluid_race_table(docs, name="fluid_race_cpu.json"):
     """The race in a fluid (`benchmarks/fluid_race.py`): per Stokes number and budget, the fastest row
     of each side and their ratio; a placeholder until the benchmark has written its results file."""
@@ -1081,6 +1095,7 @@ TABLES = {
     "stability_drift_table": stability_drift_table,
     "identify_speed_table": identify_speed_table,
     "identify_sysid_table": identify_sysid_table,
+    "overdamped_cost_table": overdamped_cost_table,
     "order4_table": order4_table,
     "float32_horizon_table": float32_horizon_table,
     "float32_rotor_table": float32_rotor_table,
