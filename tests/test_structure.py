@@ -3,11 +3,13 @@
 A module that imports another which (directly or through others) imports it back
 runs half-initialised, hides which concept depends on which, and forces lazy
 imports inside functions. The import graph is read from the source with `ast`, so
-imports inside functions count too.
+imports inside functions count too. Importing the package runs no JAX computation.
 """
 
 import ast
 import pathlib
+import subprocess
+import sys
 
 import pytest
 
@@ -135,3 +137,19 @@ def test_find_cycle_sees_cycles(tmp_path, files, cycle):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
     assert find_cycle(import_graph(tmp_path, "pkg")) == cycle
+
+
+def test_importing_jaxrot_starts_no_jax_backend():
+    """A program configures JAX after its imports (``jax_num_cpu_devices``, ``jax.distributed``):
+    a module that computes with JAX at import (a table checked with ``jnp``) starts the backend
+    first and that configuration then raises. Measured: the exponential tableaux' import-time check
+    did, and tests/test_multiprocess.py's workers failed."""
+    modules = sorted(n for n in module_names(PACKAGE_DIR, "jaxrot") if "__main__" not in n)
+    program = (
+        "import importlib, jax\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        "jax.config.update('jax_num_cpu_devices', 2)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]

@@ -98,7 +98,7 @@ class ExponentialTableau(NamedTuple):
         for node, row in self.rows():
             for z in (0.0, -0.3, -4.0, -60.0):
                 total = sum(_term_value(t, z) for terms in row.values() for t in terms)
-                expected = node * float(phi_functions(np.float64(node * z), 1)[1])
+                expected = node * float(phi_functions(np.float64(node * z), 1, np)[1])
                 if abs(total - expected) > 1e-12 * max(1.0, abs(expected)):
                     raise TypeError(
                         f"exponential tableau row at node {node}: Σ a(z={z}) = {total}, not {expected}."
@@ -107,7 +107,7 @@ class ExponentialTableau(NamedTuple):
 
 def _term_value(term, z):
     coefficient, k, node = term
-    return coefficient * float(phi_functions(np.float64(node * z), k)[k])
+    return coefficient * float(phi_functions(np.float64(node * z), k, np)[k])
 
 
 def _weights(tableau: ExponentialTableau, z):

@@ -11,6 +11,7 @@ A. Ostermann, "Exponential integrators", Acta Numerica 19, 209–286 (2010), sec
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 
 def _series_terms(dtype, k_max) -> int:
@@ -25,8 +26,11 @@ def _series_terms(dtype, k_max) -> int:
     return n
 
 
-def phi_functions(z, k_max):
+def phi_functions(z, k_max, xp=jnp):
     """``[φ_0(z), φ_1(z), …, φ_{k_max}(z)]``, each the shape of ``z``; ``z ≤ 0`` (a decay rate × −h).
+
+    ``xp=numpy`` evaluates them without JAX: the tableau checks that run at import must not
+    start a JAX backend (a program sets ``jax_num_cpu_devices`` and the like after importing us).
 
     Example:
         >>> import jax.numpy as jnp
@@ -36,20 +40,20 @@ def phi_functions(z, k_max):
         >>> [float(p) for p in phi_functions(jnp.array(-1e8), 2)]
         [0.0, 1e-08, 9.9999999e-09]
     """
-    z = jnp.asarray(z)
-    if not jnp.issubdtype(z.dtype, jnp.floating):
-        z = z.astype(jnp.result_type(float))
-    near = jnp.abs(z) <= 1
-    z_near = jnp.where(near, z, 0)  # double where: each branch sees only arguments it is exact for
-    z_far = jnp.where(near, -1, z)
-    series = jnp.zeros_like(z)
+    z = xp.asarray(z)
+    if not xp.issubdtype(z.dtype, xp.floating):
+        z = z.astype(jnp.result_type(float) if xp is jnp else np.float64)
+    near = xp.abs(z) <= 1
+    z_near = xp.where(near, z, 0)  # double where: each branch sees only arguments it is exact for
+    z_far = xp.where(near, -1, z)
+    series = xp.zeros_like(z)
     for n in reversed(range(_series_terms(z.dtype, k_max))):
         series = series * z_near + 1 / math.factorial(n + k_max)
     near_values = [series]
     for k in range(k_max, 0, -1):
         near_values.append(1 / math.factorial(k - 1) + z_near * near_values[-1])
     near_values.reverse()
-    far_values = [jnp.exp(z_far)]
+    far_values = [xp.exp(z_far)]
     for k in range(1, k_max + 1):
         far_values.append((far_values[-1] - 1 / math.factorial(k - 1)) / z_far)
-    return [jnp.where(near, a, b) for a, b in zip(near_values, far_values, strict=True)]
+    return [xp.where(near, a, b) for a, b in zip(near_values, far_values, strict=True)]
