@@ -11,6 +11,7 @@ from .._compile import filter_jit
 from .._integrate._runtime_check import IntegrationError, nonfinite_message
 from .._particles import PARTICLES, split_per_body, unflatten_trajectory
 from .._state import Trajectory
+from .._thermal._bind import brownian_scheme, brownian_start, without_temperature
 from .._validation import (
     QUATERNION_NORM_TOL,
     check_count,
@@ -98,13 +99,19 @@ def overdamped_rollout(
     t0 = jnp.asarray(t0).astype(dtype)
     if t0.ndim != 0:
         raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
-    scheme = resolve_overdamped(scheme)
+    brownian = brownian_scheme(scheme, key)  # at a temperature: `jaxrot._thermal._brownian`
+    scheme = resolve_overdamped(scheme) if brownian is None else brownian
     fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
     args, args_axes = split_per_body(args, batch_shape)
     n = math.prod(batch_shape)
+    start = q.reshape(n, 4)
+    if brownian is None:
+        fluid = without_temperature(fluid, scheme.name, key, langevin=False)
+    else:  # each body's start carries its noise's key and its diffusion
+        scheme, start = brownian_start(brownian, start, fluid, key, dt)
     traj = _overdamped_flat(
         scheme,
-        q.reshape(n, 4),
+        start,
         fluid,
         fluid_axes,
         dt,
