@@ -46,14 +46,13 @@ class BAOAB(AbstractLangevinScheme):
     Example:
         >>> import jax, jax.numpy as jnp, jaxrot
         >>> fluid = jaxrot.Fluid(jnp.array([2.0, 2.0, 2.0]), kT=0.5)
-        >>> q0 = jnp.tile(jnp.array([1.0, 0, 0, 0]), (2000, 1))
-        >>> s = jaxrot.RotState(q0, jnp.zeros((2000, 3)))
+        >>> q0 = jnp.tile(jnp.array([1.0, 0, 0, 0]), (4000, 1))
+        >>> s = jaxrot.RotState(q0, jnp.zeros((4000, 3)))  # at rest: kT/I_k per axis after 1/ζ
         >>> inertia = jnp.array([1.0, 2.0, 3.0])
-        >>> traj = jaxrot.rollout("baoab", s, inertia, 0.1, 100, fluid=fluid, key=jax.random.key(0),
-        ...                       save_every=100)
-        >>> energy = inertia * jaxrot.quaternion.rotate(jaxrot.quaternion.conjugate(traj.q[-1]),
-        ...                                             traj.omega[-1]) ** 2
-        >>> [round(float(e), 1) for e in energy.mean(axis=0)]  # kT on every axis
+        >>> traj = jaxrot.rollout("baoab", s, inertia, 0.2, 20, fluid=fluid, key=jax.random.key(0),
+        ...                       save_every=20)
+        >>> spin = jaxrot.quaternion.rotate(jaxrot.quaternion.conjugate(traj.q[-1]), traj.omega[-1])
+        >>> [round(float(e), 1) for e in inertia * jnp.mean(spin**2, axis=0)]  # kT on every axis
         [0.5, 0.5, 0.5]
     """
 

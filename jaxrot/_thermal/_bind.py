@@ -69,6 +69,9 @@ def brownian_start(scheme, q, fluid, key, dt):
     scheme bound to the key and the step size (`jaxrot._thermal._brownian.for_steps`)."""
     n = q.shape[0]
     kT = jnp.asarray(fluid.kT)
-    diffusion = jnp.broadcast_to((kT[..., None] if kT.ndim else kT) / fluid.friction, (n, 3))
+    kT = kT[:, None] if kT.ndim else kT  # (N, 1) per body, or shared
+    friction = jnp.asarray(fluid.friction)
+    friction = friction if friction.ndim == 2 or kT.ndim == 0 else friction[None]
+    diffusion = jnp.broadcast_to(kT / friction, (n, 3))
     key_data, impl = (None, None) if key is None else body_keys(check_key(key), n)
     return for_steps(scheme.bind(impl), diffusion, dt), BrownianStart(q, key_data, diffusion)

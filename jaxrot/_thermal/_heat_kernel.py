@@ -36,6 +36,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 
@@ -77,6 +78,11 @@ def _upper_gamma_three_halves(y):
     return lax.erfc(root) + (2 / math.sqrt(math.pi)) * root * jnp.exp(-y)
 
 
+def _along_terms(values, like):
+    """Constants ``(K,)`` as ``(1, …, 1, K)``: explicit broadcasting against ``like``'s ``(…, K)`` terms."""
+    return jnp.asarray(values, like.dtype).reshape((1,) * like.ndim + (-1,))
+
+
 def _gamma_series(x, sigma):
     """``(F(x), 1 − F(x), F'(x))`` of the small-σ law, ``x = ψ/√(2σ)``.
 
@@ -84,12 +90,13 @@ def _gamma_series(x, sigma):
     ``t_j = y^{3/2+j} e^{−y} / Γ(5/2 + j)``: ``Σ_m w_m P_m = P(3/2, y) Σ_m w_m − Σ_j t_j Σ_{m>j} w_m``.
     Written over an array axis of terms, not as a recurrence: XLA would copy a recurrence's
     expression tree into each of its two uses, doubling it at every term."""
+    sigma = jnp.broadcast_to(sigma, x.shape)
     y = 0.5 * x * x
-    signed = jnp.asarray([(-1) ** k / math.factorial(k) for k in range(_GAMMA_TERMS)], x.dtype)
+    signed = _along_terms([(-1) ** k / math.factorial(k) for k in range(_GAMMA_TERMS)], x)
     powers = jnp.cumprod(jnp.broadcast_to(sigma[..., None], (*sigma.shape, _GAMMA_TERMS - 1)), axis=-1)
     weights = jnp.concatenate([jnp.ones_like(sigma)[..., None], powers], axis=-1) * signed
     tails = jnp.cumsum(weights[..., ::-1], axis=-1)[..., ::-1] - weights  # Σ_{m>j} w_m
-    inverse_gammas = jnp.asarray([1 / math.gamma(k + 2.5) for k in range(_GAMMA_TERMS)], x.dtype)
+    inverse_gammas = _along_terms([1 / math.gamma(k + 2.5) for k in range(_GAMMA_TERMS)], x)
     y_powers = jnp.cumprod(jnp.broadcast_to(y[..., None], (*y.shape, _GAMMA_TERMS - 1)), axis=-1)
     y_powers = jnp.concatenate([jnp.ones_like(y)[..., None], y_powers], axis=-1)
     lead = y * jnp.sqrt(y) * jnp.exp(-y)  # y^{3/2} e^{−y}
@@ -108,8 +115,9 @@ def _gamma_series(x, sigma):
 def _spectral(psi, sigma, terms):
     """``(F(ψ), 1 − F(ψ), p(ψ))`` by the spectral series, ``ψ ∈ [0, π]``; the terms over an array
     axis (see `_gamma_series`), ``sin((k ± 1)ψ)`` from ``sin kψ`` and ``cos kψ``."""
+    sigma = jnp.broadcast_to(sigma, psi.shape)
     s, c = jnp.sin(psi), jnp.cos(psi)
-    k = jnp.arange(2, terms + 1, dtype=psi.dtype)
+    k = _along_terms(np.arange(2, terms + 1), psi)
     weights = k * jnp.exp(-(k * k - 1) * sigma[..., None])
     angles = k * psi[..., None]
     sin_k, cos_k = jnp.sin(angles), jnp.cos(angles)

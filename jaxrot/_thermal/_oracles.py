@@ -47,5 +47,7 @@ def dipole_orientations(key, n: int, x, dtype=jnp.float64):
 def maxwell_spins(key, q, inertia, kT):
     """World angular velocities ``(n, 3)`` of bodies at ``q`` ``(n, 4)`` from the Maxwell law:
     ``ω_b,k ~ N(0, kT/I_k)``."""
-    body = jax.random.normal(key, q.shape[:-1] + (3,), q.dtype) * jnp.sqrt(kT / jnp.asarray(inertia, q.dtype))
+    scale = jnp.sqrt(kT / jnp.asarray(inertia, q.dtype))
+    normals = jax.random.normal(key, q.shape[:-1] + (3,), q.dtype)
+    body = normals * scale.reshape((1,) * (normals.ndim - scale.ndim) + scale.shape)
     return quat.rotate(q, body)
