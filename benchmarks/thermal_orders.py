@@ -78,7 +78,8 @@ def measure(n_bodies, only=None, on_case=None):
             continue
         for label, setting, t_end, averaged, quantities, letters in CASES[family]:
             start = time.perf_counter()
-            problem = problems.problem(scheme, setting, n_bodies, jax.random.key(1))
+            largest_dt = t_end / N_FINE * COARSENINGS[0]
+            problem = problems.problem(scheme, setting, n_bodies, jax.random.key(1), largest_dt=largest_dt)
             ladder = weak.ladder(
                 problem, jax.random.key(2), t_end / N_FINE, N_FINE, COARSENINGS, 0.5 if averaged else 1.0
             )

@@ -91,6 +91,8 @@ def overdamped_rollout(
         [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     """
     q, dtype = _check_orientations(q)
+    # At a temperature (`jaxrot._thermal`): read before the checks cast the fluid and dt into the trace.
+    brownian = brownian_scheme(scheme, key, fluid, dt)
     batch_shape = tuple(q.shape[:-1])
     dt = check_dt(dt).astype(dtype)
     n_steps = check_count(n_steps, "n_steps", 0)
@@ -99,7 +101,6 @@ def overdamped_rollout(
     t0 = jnp.asarray(t0).astype(dtype)
     if t0.ndim != 0:
         raise ValueError(f"`t0` must be a scalar time; got shape {t0.shape}.")
-    brownian = brownian_scheme(scheme, key)  # at a temperature: `jaxrot._thermal._brownian`
     scheme = resolve_overdamped(scheme) if brownian is None else brownian
     fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
     args, args_axes = split_per_body(args, batch_shape)
@@ -108,7 +109,7 @@ def overdamped_rollout(
     if brownian is None:
         fluid = without_temperature(fluid, scheme.name, key, langevin=False)
     else:  # each body's start carries its noise's key and its diffusion
-        scheme, start = brownian_start(brownian, start, fluid, key, dt)
+        scheme, start = brownian_start(brownian, start, fluid, key)
     traj = _overdamped_flat(
         scheme,
         start,

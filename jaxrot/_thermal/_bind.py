@@ -3,8 +3,11 @@
 from types import MappingProxyType
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._particles import unwrap_per_body
 from .._validation import check_values
 from ._baoab import BAOAB
 from ._brownian import BROWNIAN_SCHEMES, DEFAULT_BROWNIAN, AbstractBrownianScheme, BrownianStart, for_steps
@@ -51,22 +54,29 @@ def bind_thermal(scheme, fluid, fluid_axes, args, args_axes, key, n: int):
     return scheme.bind(impl), ThermalArgs(args, fluid, key_data), axes
 
 
-def brownian_scheme(scheme, key):
+def brownian_scheme(scheme, key, fluid, dt):
     """The Brownian scheme ``scheme`` names (None with a ``key``: the default), or None (a deterministic
-    overdamped scheme, which `jaxrot.overdamped_rollout` resolves)."""
-    if isinstance(scheme, AbstractBrownianScheme):
-        return scheme
+    overdamped scheme, which `jaxrot.overdamped_rollout` resolves). ``fluid`` and ``dt`` as the caller
+    gave them (unchecked): where they are concrete, the scheme leaves out what their steps cannot
+    need (`jaxrot._thermal._brownian.for_steps`)."""
     if isinstance(scheme, str) and scheme in BROWNIAN_SCHEMES:
-        return BROWNIAN_SCHEMES[scheme]
-    if scheme is None and key is not None:
-        return BROWNIAN_SCHEMES[DEFAULT_BROWNIAN]
-    return None
+        scheme = BROWNIAN_SCHEMES[scheme]
+    elif scheme is None and key is not None:
+        scheme = BROWNIAN_SCHEMES[DEFAULT_BROWNIAN]
+    if not isinstance(scheme, AbstractBrownianScheme):
+        return None
+    try:
+        kT, friction = (np.asarray(unwrap_per_body(x), np.float64) for x in (fluid.kT, fluid.friction))
+        diffusion = kT[..., None] / friction if kT.ndim else kT / friction
+        return for_steps(scheme, diffusion, np.asarray(dt, np.float64))
+    except (AttributeError, TypeError, ValueError, jax.errors.TracerArrayConversionError):
+        return scheme  # traced or malformed: everything compiled; the checks that follow explain a bad value
 
 
-def brownian_start(scheme, q, fluid, key, dt):
+def brownian_start(scheme, q, fluid, key):
     """``(scheme, start)`` of an overdamped rollout at a temperature: ``q`` ``(N, 4)`` with each body's
     key data and diffusion ``kT/ζ`` ``(N, 3)`` (`BrownianStart`); ``fluid`` the flattened values; the
-    scheme bound to the key and the step size (`jaxrot._thermal._brownian.for_steps`)."""
+    scheme bound to the key's implementation."""
     n = q.shape[0]
     kT = jnp.asarray(fluid.kT)
     kT = kT[:, None] if kT.ndim else kT  # (N, 1) per body, or shared
@@ -74,4 +84,4 @@ def brownian_start(scheme, q, fluid, key, dt):
     friction = friction if friction.ndim == 2 or kT.ndim == 0 else friction[None]
     diffusion = jnp.broadcast_to(kT / friction, (n, 3))
     key_data, impl = (None, None) if key is None else body_keys(check_key(key), n)
-    return for_steps(scheme.bind(impl), diffusion, dt), BrownianStart(q, key_data, diffusion)
+    return scheme.bind(impl), BrownianStart(q, key_data, diffusion)

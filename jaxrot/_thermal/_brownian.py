@@ -177,7 +177,7 @@ def for_steps(scheme, diffusion, dt):
     ``dt`` show that no body's ``D_min Δt`` reaches `SMALL_STEP`; else ``scheme``."""
     if not isinstance(scheme, BrownianSplitting) or not is_concrete(diffusion, dt):
         return scheme
-    largest = float(np.max(np.min(np.asarray(diffusion), axis=-1), initial=0.0) * np.asarray(dt))
+    largest = float(np.max(np.min(np.asarray(diffusion), axis=-1), initial=0.0) * np.max(np.asarray(dt)))
     return dataclasses.replace(scheme, large_steps=largest > SMALL_STEP)
 
 

@@ -23,7 +23,7 @@ from .._fluid._overdamped_rollout import velocity_field
 from .._inertia import body_inertia
 from .._state import RotState
 from ..torques import UniformField
-from ._brownian import AbstractBrownianScheme
+from ._brownian import AbstractBrownianScheme, for_steps
 from ._langevin import LangevinCarry
 from ._oracles import axis_correlation, dipole_orientations, langevin_function, maxwell_spins
 from ._weak import WeakProblem
@@ -66,8 +66,9 @@ def _field(setting, dtype):
     return UniformField(), args
 
 
-def problem(scheme, setting: ThermalSetting, n: int, key, dtype=jnp.float64) -> WeakProblem:
-    """The `WeakProblem` of ``setting`` for ``scheme`` with ``n`` bodies (initial state from ``key``)."""
+def problem(scheme, setting: ThermalSetting, n: int, key, dtype=jnp.float64, largest_dt=None) -> WeakProblem:
+    """The `WeakProblem` of ``setting`` for ``scheme`` with ``n`` bodies (initial state from ``key``);
+    ``largest_dt``, when given, lets a Brownian scheme leave out what smaller steps cannot need."""
     fluid = jax.tree_util.tree_map(jnp.asarray, _fluid(setting, dtype))
     torque, args = _field(setting, dtype)
     key_q, key_w = jax.random.split(key)
@@ -80,6 +81,8 @@ def problem(scheme, setting: ThermalSetting, n: int, key, dtype=jnp.float64) -> 
             raise ValueError("an overdamped scheme needs a setting without inertia")
         velocity = velocity_field(fluid, torque, args)
         diffusion = fluid.kT / fluid.friction
+        if largest_dt is not None:
+            scheme = for_steps(scheme, diffusion[None], largest_dt)
 
         def advance(carry, t, dt, normals):
             return scheme.advance(*carry, diffusion, t, dt, velocity, normals)
