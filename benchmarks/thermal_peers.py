@@ -23,6 +23,9 @@ Measured against dt (0.5, 0.25, 0.125, 0.0625), each method with its own noise:
   over the three body axes), against jaxrot's ``baoab`` at dt = 1/128 with 8× the bodies (the
   underdamped correlation has no closed form);
 - for diffrax, the largest ``| |q| − 1 |`` seen (nothing keeps its quaternion on the unit sphere);
+- for jax_md, torque-free at dt = 1/32: its rotational temperature per axis and how far its conjugate
+  momentum leaves the quaternion's tangent space, as shipped and with its O step's noise drawn with
+  the exact covariance (`jax_md_diagnosis`);
 - with ``--timing``: cost per body-step (median wall time of the compiled run over bodies × steps,
   N = 10⁴, the dipole scene).
 
@@ -252,6 +255,57 @@ def measure_biases(n, peer, dts=DTS):
     return rows, {"correlation_reference": ref_mean, "correlation_reference_stderr": ref_err}
 
 
+def jax_md_diagnosis(n=4096, dt=1 / 32, steps=512):
+    """jax_md's rotational temperature per axis, torque-free, at a small dt, and ``⟨(P·q)²⟩`` of its
+    conjugate momentum (0 on the tangent space), as shipped and with its O step's noise drawn with the
+    exact covariance ``Σ_l s_l² P_l(q) P_l(q)ᵀ`` (``Σ_l s_l P_l(q) ξ_l``) instead of component by
+    component with the variances ``Σ_l s_l² P_l(q)²``; everything else as jax_md's."""
+    from jax_md import rigid_body, simulate, space
+    from jax_md.rigid_body import MOMENTUM_PERMUTATION as perm
+
+    shipped = simulate.stochastic_step._registry[rigid_body.RigidBody]
+
+    def corrected(state, dt, kT, gamma):
+        key, center_key, orientation_key = jax.random.split(state.rng, 3)
+        rest, center, orientation = rigid_body.split_center_and_orientation(state)
+        center = simulate.stochastic_step(center.set(rng=center_key), dt, kT, gamma.center)
+        momentum, inertia, g = orientation.momentum.vec, orientation.mass, gamma.orientation
+        m = 4 / jnp.sum(1 / inertia, axis=-1)
+        q = orientation.position.vec
+        xi = jax.random.normal(orientation_key, (q.shape[0], 3), q.dtype)
+        new = 0
+        for axis in range(3):
+            p = perm[axis](q)
+            decay = jnp.exp(-g * m * dt / (4 * inertia[:, axis]))
+            scale = jnp.sqrt(4 * kT * inertia[:, axis] * (1 - jnp.exp(-m * g * dt / (2 * inertia[:, axis]))))
+            new = new + (decay * jnp.sum(p * momentum, axis=-1) + scale * xi[:, axis])[:, None] * p
+        orientation = orientation.set(momentum=rigid_body.Quaternion(new))
+        return rigid_body.merge_center_and_orientation(rest.set(rng=key), center, orientation)
+
+    result = {"dt": dt, "steps": steps, "bodies": n}
+    for label, step in (("shipped", shipped), ("exact_covariance", corrected)):
+        simulate.stochastic_step.register(rigid_body.RigidBody)(step)
+        _, shift = space.free()
+        gamma = rigid_body.RigidBody(jnp.asarray(0.1), jnp.asarray(FRICTION * float(jnp.sum(1 / INERTIA))))
+        init_fn, step_fn = simulate.nvt_langevin(lambda body, **kw: 0.0 * jnp.sum(body.center), shift, dt, KT,
+                                                 gamma=gamma)  # fmt: skip
+        q0 = jnp.tile(jnp.array([1.0, 0.0, 0.0, 0.0]), (n, 1))
+        position = rigid_body.RigidBody(jnp.zeros((n, 3)), rigid_body.Quaternion(q0))
+        mass = rigid_body.RigidBody(jnp.ones((n,)), jnp.broadcast_to(INERTIA, (n, 3)))
+        md = init_fn(jax.random.key_data(jax.random.key(7)), position, mass=mass)
+        advance = jax.jit(lambda s, step_fn=step_fn: jax.lax.fori_loop(0, steps, lambda i, x: step_fn(x), s))
+        md = advance(md)
+        orientation, momentum = md.position.orientation, md.momentum.orientation
+        angular = rigid_body.conjugate_momentum_to_angular_momentum(orientation, momentum)
+        result[label] = {
+            "kinetic_per_axis_over_kT": (jnp.mean(angular**2, axis=0) / INERTIA / KT).tolist(),
+            "p_dot_q_squared": float(jnp.mean(jnp.sum(momentum.vec * orientation.vec, axis=-1) ** 2)),
+        }
+    simulate.stochastic_step.register(rigid_body.RigidBody)(shipped)
+    print(f"jax_md diagnosis: {result}", file=sys.stderr, flush=True)
+    return result
+
+
 def measure_cost(n, peer, n_steps=256, repeats=3):
     """Seconds per body-step of each method on the dipole scene, dt = 0.0625 (compiled, median)."""
     rows = []
@@ -262,8 +316,16 @@ def measure_cost(n, peer, n_steps=256, repeats=3):
         _, compile_s, seconds = time_compiled(
             lambda args, run=run: run(*args), (q, w, jax.random.key(5)), repeats, options
         )
-        rows.append({"method": name, "bodies": n, "steps": n_steps, "seconds_per_body_step": seconds / (n * n_steps),
-                     "compile_s": compile_s})  # fmt: skip
+        per_step = seconds / (n * n_steps)
+        rows.append(
+            {
+                "method": name,
+                "bodies": n,
+                "steps": n_steps,
+                "seconds_per_body_step": per_step,
+                "compile_s": compile_s,
+            }
+        )
         print(
             f"{name:<20} {seconds / (n * n_steps) * 1e9:8.1f} ns per body-step", file=sys.stderr, flush=True
         )
@@ -283,6 +345,7 @@ def main(argv=None):
               file=sys.stderr)  # fmt: skip
     n = 256 if args.quick else args.bodies
     rows, reference = measure_biases(n, peer, DTS[:2] if args.quick else DTS)
+    diagnosis = jax_md_diagnosis(256 if args.quick else 4096) if peer else None
     cost = (
         measure_cost(256 if args.quick else 10_000, peer, 16 if args.quick else 256)
         if args.timing or args.quick
@@ -308,6 +371,7 @@ def main(argv=None):
         },  # fmt: skip
         **reference,
         "rows": rows,
+        "jax_md_diagnosis": diagnosis,
         "cost": cost,
     }
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")

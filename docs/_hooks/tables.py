@@ -871,9 +871,30 @@ def thermal_peers_table(docs, name="thermal_peers.json"):
     )
 
 
+def thermal_jax_md_diagnosis(docs, name="thermal_peers.json"):
+    """jax_md's rotational temperature and tangent-space defect, shipped and with the exact O step."""
+    data = _read(docs, name)
+    d = data.get("jax_md_diagnosis")
+    if not d:
+        return "*(jax_md was not installed when `docs/thermal_peers.json` was written.)*"
+
+    def cells(x):
+        axes = ", ".join(f"{v:.3f}" for v in x["kinetic_per_axis_over_kT"])
+        return [axes, _sig(x["p_dot_q_squared"], 2)]
+
+    rows = [
+        ["as shipped", *cells(d["shipped"])],
+        ["O step's noise with the exact covariance", *cells(d["exact_covariance"])],
+    ]
+    note = f" (torque-free, dt = {d['dt']:g}, {d['steps']} steps from the Maxwell law, {d['bodies']} bodies)"
+    header = ["jax_md nvt_langevin", "⟨I_k ω_k²⟩ / kT, k = 1, 2, 3", "⟨(P·q)²⟩ (0 on the tangent space)"]
+    return _table(header, rows) + _provenance(name, data["machine"], note)
+
+
 TABLES = {
     "thermal_orders_table": thermal_orders_table,
     "thermal_peers_table": thermal_peers_table,
+    "thermal_jax_md_diagnosis": thermal_jax_md_diagnosis,
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "gradient_compile_table": gradient_compile_table,
