@@ -47,8 +47,14 @@ from ._integrate._rollout import rollout as rollout
 from ._integrate._runtime_check import IntegrationError as IntegrationError
 from ._particles import per_body as per_body
 from ._state import RotState as RotState, Trajectory as Trajectory
+from ._thermal._brownian import BROWNIAN_SCHEMES as BROWNIAN_SCHEMES
 from .scenes import SCENES as SCENES, Scene as Scene
-from .schemes import FLUID_SCHEMES as FLUID_SCHEMES, SCHEMES as SCHEMES, AbstractScheme as AbstractScheme
+from .schemes import (
+    FLUID_SCHEMES as FLUID_SCHEMES,
+    SCHEMES as SCHEMES,
+    THERMAL_SCHEMES as THERMAL_SCHEMES,
+    AbstractScheme as AbstractScheme,
+)
 
 
 __version__ = importlib.metadata.version("jaxrot")

@@ -21,7 +21,10 @@ def main(argv=None) -> int:
     cmp.add_argument("--list-scenes", action="store_true", help="list the built-in scenes and exit")
     cmp.add_argument("--t-end", type=float, default=None, help="horizon (default: the scene's)")
     cmp.add_argument(
-        "--particles", type=int, default=100, help="vmapped bodies each timed run advances (default 100)"
+        "--particles",
+        type=int,
+        default=None,
+        help="vmapped bodies each timed run advances (default 100; a thermal scene's ensemble: 4096)",
     )
     cmp.add_argument(
         "--dtype",
@@ -56,19 +59,24 @@ def main(argv=None) -> int:
     ns = parser.parse_args(argv)
 
     for name in ("particles", "coarse_steps", "levels", "repeats"):
-        if getattr(ns, name) < 1:
+        if getattr(ns, name) is not None and getattr(ns, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1")
 
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from .scenes import FLUID_SCENES, SCENES
+    from .scenes import FLUID_SCENES, SCENES, THERMAL_SCENES
 
     if ns.list_scenes:
-        for name, factory in {**SCENES, **FLUID_SCENES}.items():
+        for name, factory in {**SCENES, **FLUID_SCENES, **THERMAL_SCENES}.items():
             scene = factory()
             print(f"{name:<26} {scene.n_bodies:>4} bodies  {scene.description}")
         return 0
+    if ns.scene in THERMAL_SCENES:  # weak errors of ensemble averages: `jaxrot._thermal._compare`
+        from ._thermal._compare import main_thermal
+
+        return main_thermal(ns, parser)
+    ns.particles = 100 if ns.particles is None else ns.particles
     from .comparison import compare, format_table, machine_info, write_outputs
 
     if ns.scene in FLUID_SCENES:  # its own rows: the fluid schemes, the overdamped ones, Kvaerno5

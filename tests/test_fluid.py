@@ -190,7 +190,7 @@ def test_bad_fluid_rollouts_are_value_errors_before_compiling():
     # a host callback in pytest-xdist workers, as tests/test_validation.py notes).
     with pytest.raises((jax.errors.JaxRuntimeError, ValueError), match="(?s)`fluid.kT` > 0 .* needs a PRNG"):
         jax.block_until_ready(jax.jit(traced)(1.0))
-    with pytest.raises(NotImplementedError, match="Thermal"):
+    with pytest.raises(ValueError, match="'exp_rk4' has no thermal noise.*use 'baoab'"):
         jaxrot.rollout("exp_rk4", state, jnp.ones(3), 0.1, 2, fluid=warm, key=jax.random.key(0))
     with pytest.raises(ValueError, match=r"`fluid.friction` has shape \(3, 3\)"):
         jaxrot.rollout("exp_rk4", state, jnp.ones(3), 0.1, 2, fluid=jaxrot.Fluid(jnp.ones((3, 3))))

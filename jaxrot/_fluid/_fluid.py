@@ -178,7 +178,7 @@ def check_fluid(fluid, batch_shape, dtype, key=None):
 
     Each field is cast to ``dtype`` and is shared (its one-body shape) or per body (the particle
     axes ``batch_shape`` in front, or a `jaxrot.per_body`), flattened to one axis. ``kT > 0`` needs a
-    ``key``; the thermal torque itself is not implemented yet (issue 55).
+    ``key``; the schemes that take the thermal torque are `jaxrot._thermal`'s.
     """
     if not isinstance(fluid, Fluid):
         raise ValueError(f"`fluid` must be None or a jaxrot.Fluid; got {type(fluid).__name__}.")
@@ -212,8 +212,6 @@ def check_fluid(fluid, batch_shape, dtype, key=None):
             "`fluid.kT` > 0 (a fluid at a temperature) needs a PRNG `key`, e.g. key=jax.random.key(0): "
             "the thermal torque is random. Pass kT=0 for a deterministic run.",
         )
-    elif key is not None and is_concrete(kT) and np.any(np.asarray(kT) > 0):
-        raise NotImplementedError("Thermal fluids (kT > 0) are not implemented yet; pass kT=0.")
     treedef = jax.tree_util.tree_structure(jax.tree_util.tree_map(_unwrap, fluid, is_leaf=is_per_body))
     present = [name for name in _BODY_SHAPES if values[name] is not None]
     return (

@@ -11,6 +11,7 @@ from .._compile import filter_jit
 from .._integrate._runtime_check import IntegrationError, nonfinite_message
 from .._particles import PARTICLES, split_per_body, unflatten_trajectory
 from .._state import Trajectory
+from .._thermal._bind import brownian_scheme, brownian_start, without_temperature
 from .._validation import (
     QUATERNION_NORM_TOL,
     check_run_times,
@@ -89,16 +90,23 @@ def overdamped_rollout(
         [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     """
     q, dtype = _check_orientations(q)
+    # At a temperature (`jaxrot._thermal`): read before the checks cast the fluid and dt into the trace.
+    brownian = brownian_scheme(scheme, key, fluid, dt)
     batch_shape = tuple(q.shape[:-1])
     dt, n_steps, save_every, t0 = check_run_times(dt, n_steps, save_every, t0, dtype)
     check_torque(torque)
-    scheme = resolve_overdamped(scheme)
+    scheme = resolve_overdamped(scheme) if brownian is None else brownian
     fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
     args, args_axes = split_per_body(args, batch_shape)
     n = math.prod(batch_shape)
+    start = q.reshape(n, 4)
+    if brownian is None:
+        fluid = without_temperature(fluid, scheme.name, key, langevin=False)
+    else:  # each body's start carries its noise's key and its diffusion
+        scheme, start = brownian_start(brownian, start, fluid, key)
     traj = _overdamped_flat(
         scheme,
-        q.reshape(n, 4),
+        start,
         fluid,
         fluid_axes,
         dt,

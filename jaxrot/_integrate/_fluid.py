@@ -1,7 +1,10 @@
 """A rollout's ``fluid=``: the scheme that integrates its friction and the per-body values it reads."""
 
+import math
+
 from .._fluid._fluid import check_fluid
 from .._inertia import is_diagonal_form
+from .._thermal._bind import bind_thermal, is_langevin, without_temperature
 from ..schemes import FLUID_SCHEMES
 from ..schemes._exponential import FluidArgs
 
@@ -20,7 +23,7 @@ def bind_fluid(scheme, fluid, key, batch_shape, dtype, inertia, args, args_axes,
     ζΔt/I → ∞), a full inertia tensor, or a drive.
     """
     in_fluid = getattr(scheme, "in_fluid", None)
-    if in_fluid is None:
+    if in_fluid is None and not is_langevin(scheme):
         raise ValueError(
             f"scheme {scheme.name!r} cannot integrate a fluid's friction (`fluid=`): its explicit steps are "
             f"stable only while ζΔt/I stays below about 2. Use {_capable()}, which take the friction's "
@@ -36,4 +39,7 @@ def bind_fluid(scheme, fluid, key, batch_shape, dtype, inertia, args, args_axes,
     if drive is not None:
         raise ValueError("`drive` and `fluid` cannot be combined: pass one of them.")
     values, axes = check_fluid(fluid, batch_shape, dtype, key)
+    if is_langevin(scheme):  # at a temperature (`jaxrot._thermal`): the noise's keys travel with args
+        return bind_thermal(scheme, values, axes, args, args_axes, key, math.prod(batch_shape))
+    values = without_temperature(values, scheme.name, key)
     return in_fluid(), FluidArgs(args, values), FluidArgs(args_axes, axes)

@@ -2,6 +2,7 @@
 
 from types import MappingProxyType
 
+from .._thermal._bind import THERMAL_SCHEMES as THERMAL_SCHEMES
 from ._base import AbstractScheme as AbstractScheme
 from ._exponential import (
     AbstractExponentialLieRK as AbstractExponentialLieRK,
@@ -52,14 +53,16 @@ FLUID_SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (ExpMidpoint
 
 
 def resolve_scheme(scheme) -> AbstractScheme:
-    """A scheme object from a name in `SCHEMES` or `FLUID_SCHEMES`, or an `AbstractScheme` instance."""
+    """A scheme object from a name in `SCHEMES`, `FLUID_SCHEMES` or `THERMAL_SCHEMES`, or an instance."""
     if isinstance(scheme, AbstractScheme):
         return scheme
     if isinstance(scheme, str) and scheme in SCHEMES:
         return SCHEMES[scheme]
     if isinstance(scheme, str) and scheme in FLUID_SCHEMES:
         return FLUID_SCHEMES[scheme]
+    if isinstance(scheme, str) and scheme in THERMAL_SCHEMES:
+        return THERMAL_SCHEMES[scheme]
     raise ValueError(
-        f"`scheme` must be one of {sorted(SCHEMES) + sorted(FLUID_SCHEMES)} or a "
+        f"`scheme` must be one of {sorted(SCHEMES) + sorted(FLUID_SCHEMES) + sorted(THERMAL_SCHEMES)} or a "
         f"jaxrot.schemes.AbstractScheme instance; got {scheme!r}."
     )

@@ -1,0 +1,96 @@
+r"""The Ornstein–Uhlenbeck flow of a body's spin in a fluid at a temperature, solved exactly.
+
+About each principal axis ``k`` (body frame, the friction's axes), with the applied and gyroscopic
+torques held fixed over the step, the spin obeys
+
+    I_k du_k = ζ_k (S_k − u_k) dt + √(2 kT ζ_k) dW_k,      dθ_k = u_k dt,
+
+with ``S`` the *slow velocity*, the spin at which the fluid's torque balances the rest: the flow's
+rotation plus ``ζ⁻¹`` times the other torques. With ``x = γ h``, ``γ = ζ_k / I_k``, over a step
+``h`` it is a Gaussian (Gardiner, Handbook of Stochastic Methods, section 3.8.4):
+
+    u(h) = S + e^{−x} (u − S) + a √(2 φ₁(−2x)) ξ₁,
+    θ(h) = S h + h φ₁(−x) (u − S) + a h [φ₁(−x)² / √(2 φ₁(−2x)) ξ₁ + √W(x) ξ₂],
+
+``a = √(kT ζ h) / I``, ``φ₁(z) = (e^z − 1)/z``, ``V(x) = (2x − 3 + 4e^{−x} − e^{−2x}) / x³`` and
+``W(x) = V(x) − φ₁(−x)⁴ / (2 φ₁(−2x))`` (the variance of ``θ`` given ``u(h)``): the spin's variance
+``(kT/I)(1 − e^{−2x})``, the angle's ``(kT/I) h² x V(x)`` and their covariance ``(kT/I) h x φ₁(−x)²``.
+As ``x → ∞`` the angle's law becomes Brownian, ``N(S h, 2 kT h / ζ)``, and the spin's the
+Maxwell law ``N(S, kT/I)``; as ``x → 0``, ballistic. The spin alone (``θ`` dropped) is the exact
+"O" step of the Langevin splittings (Davidchack, Ouldridge & Tretyakov, J. Chem. Phys. 142, 144114
+(2015); Leimkuhler & Matthews, Appl. Math. Res. Express 2013, 34).
+
+Finite in value and gradient at ``x = 0`` (Taylor branch of ``V``), at ``x → ∞`` and at ``kT = 0``
+(the noise amplitude's derivative in ``kT`` there, ``∝ 1/√kT``, is returned as 0).
+"""
+
+import math
+
+import jax.numpy as jnp
+
+from ..schemes._phi import phi_functions
+
+
+def _v_series_terms(dtype) -> int:
+    eps = float(jnp.finfo(dtype).eps)
+    n = 3
+    while 2.0**n / math.factorial(n) > eps / 16:  # the terms of V at x = 1, against V(1) ≈ 0.34
+        n += 1
+    return n
+
+
+def _angle_variance_factor(x):
+    """``V(x) = (2x − 3 + 4e^{−x} − e^{−2x}) / x³`` (``2/3`` at 0, ``≈ 2/x²`` far out), ``x ≥ 0``.
+
+    The numerator cancels to ``2x³/3`` near 0: there (``x ≤ 1``) its Taylor series
+    ``Σ_{n≥3} (−1)ⁿ (4 − 2ⁿ) x^{n−3} / n!`` is summed."""
+    near = x <= 1
+    x_near = jnp.where(near, x, 0.0)
+    x_far = jnp.where(near, 2.0, x)
+    series = jnp.zeros_like(x)
+    for n in reversed(range(3, _v_series_terms(x.dtype))):
+        series = series * x_near + (-1) ** n * (4 - 2.0**n) / math.factorial(n)
+    far = (2 * x_far + 4 * jnp.expm1(-x_far) - jnp.expm1(-2 * x_far)) / x_far**3
+    return jnp.where(near, series, far)
+
+
+def _noise_scale(kT, friction, h, inertia):
+    """``a = √(kT ζ h) / I`` per axis, 0 (value and gradient) where ``kT = 0``."""
+    variance = kT * friction * h
+    positive = variance > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, variance, 1.0)), 0.0) / inertia
+
+
+def spin_relaxation(u, slow, friction, inertia, kT, h, normals=None):
+    """The exact O step: body spin ``u`` ``(3,)`` relaxed towards ``slow`` over ``h`` with the noise
+    of ``normals`` ``(3,)`` (standard normals; None: no noise). Per axis: friction, inertia ``(3,)``."""
+    x = friction / inertia * h
+    decay, _ = phi_functions(-x, 1)
+    u1 = slow + decay * (u - slow)
+    if normals is not None:
+        _, phi_double = phi_functions(-2 * x, 1)
+        u1 = u1 + _noise_scale(kT, friction, h, inertia) * jnp.sqrt(2 * phi_double) * normals
+    return u1
+
+
+def integrated_spin(u, slow, friction, inertia, kT, h, normals=None):
+    """``(u(h), θ(h))`` of the module's Gaussian step: spin and body rotation vector ``(3,)`` each.
+
+    ``normals`` ``(6,)``: ``ξ₁`` then ``ξ₂`` per axis (None: no noise)."""
+    x = friction / inertia * h
+    decay, phi = phi_functions(-x, 1)
+    deviation = u - slow
+    u1 = slow + decay * deviation
+    theta = h * slow + (h * phi) * deviation
+    if normals is not None:
+        _, phi_double = phi_functions(-2 * x, 1)
+        a = _noise_scale(kT, friction, h, inertia)
+        root = jnp.sqrt(2 * phi_double)
+        conditional = _angle_variance_factor(x) - phi**4 / (2 * phi_double)
+        conditional = jnp.where(conditional > 0, conditional, 0.0)
+        safe = jnp.where(conditional > 0, conditional, 1.0)
+        spread = jnp.where(conditional > 0, jnp.sqrt(safe), 0.0)
+        first, second = normals[:3], normals[3:]
+        u1 = u1 + (a * root) * first
+        theta = theta + (a * h) * ((phi * phi / root) * first + spread * second)
+    return u1, theta
