@@ -151,7 +151,7 @@ JOBS = {
     ),
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
     "thermal_orders": Job(
-        ("thermal_orders.json",), ("benchmarks/thermal_orders.py", "--bodies", "65536"), 60, True
+        ("thermal_orders.json",), ("benchmarks/thermal_orders.py", "--bodies", "20000"), 15, True
     ),
     # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
     "thermal_peers": Job(("thermal_peers.json",), ("benchmarks/thermal_peers.py", "--timing"), 25, True),

@@ -43,6 +43,11 @@ RESULTS = {
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
     # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
     "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
+    "overdamped_cost_cpu.json": (None, "python benchmarks/regenerate.py --only overdamped_cost"),
+    "fluid_race_cpu.json": (None, "python benchmarks/regenerate.py --only fluid_race"),
+    # Bodies at a temperature: the thermal schemes and the peers, not jaxrot.SCHEMES.
+    "thermal_orders.json": (None, "python benchmarks/regenerate.py --only thermal_orders"),
+    "thermal_peers.json": (None, "python benchmarks/regenerate.py --only thermal_peers"),
     "race_cpu/race_float64.json": ("method", "python benchmarks/regenerate.py --only race64"),
     "race_cpu/race_float32.json": ("method", "python benchmarks/regenerate.py --only race32"),
     "gpu_h100/race_heavy_top_float64.json": ("method", "python benchmarks/race.py (on the GPU)"),
