@@ -1,4 +1,4 @@
-"""The free rotor's while loop on a GPU: DMV steps per loop iteration (`_rotor.LOOP_BATCH`) 1, 2, 4, 8.
+"""The free rotor's while loop on a GPU: DMV steps per loop iteration (`_rotor_loop.LOOP_BATCH`) 1, 2, 4, 8.
 
 The rotor covers each flow with ``n = ⌈|ω| t / 0.2⌉`` DMV steps per body; past the first two they
 run in a while loop. On a GPU each iteration is a few kernel launches and a host read of the loop
@@ -31,7 +31,7 @@ import jax.numpy as jnp
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._free_body import _rotor
+from jaxrot._free_body import _rotor_loop
 from jaxrot.comparison import machine_info
 
 
@@ -77,7 +77,7 @@ def main():
         for b in opts.command_buffer_batches.split(","):
             settings.append((f"{b}+cb", int(b), None, cb))
     for label, batch, fixed, options in settings:
-        _rotor.LOOP_BATCH = batch
+        _rotor_loop.LOOP_BATCH = batch
         jax.clear_caches()  # the rotor's loop form is fixed when traced
         for name in opts.schemes.split(","):
             scheme = jaxrot.SCHEMES[name]

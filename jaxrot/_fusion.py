@@ -26,7 +26,7 @@ def tracing_for_cpu() -> bool:
     """Whether the program being traced is taken to run on CPU: JAX's default backend.
 
     Where XLA:CPU and a GPU want different programs (these barriers; the free rotor's loop,
-    `jaxrot._free_body._rotor.LOOP_BATCH`), the choice is made when tracing, by this one rule.
+    `jaxrot._free_body._rotor_loop.LOOP_BATCH`), the choice is made when tracing, by this one rule.
     """
     return jax.default_backend() == "cpu"
 

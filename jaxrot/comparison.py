@@ -17,17 +17,7 @@ scene's body and its first particle is compared with a tight diffrax reference.
 A new scheme gets its rows with no change here.
 """
 
-import csv
-import datetime
-import importlib.metadata
-import json
-import math
-import os
-import platform
-import statistics
-import subprocess
 import time
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import diffrax
@@ -37,6 +27,22 @@ import numpy as np
 from tqdm import tqdm
 
 from . import quaternion as quat
+from ._comparison._provenance import RESULTS_SCHEMA, machine_info
+from ._comparison._report import (
+    ASYMPTOTIC_ERROR,
+    budget_table,
+    fit_order,
+    format_budget_table,
+    format_recommendation,
+    format_table,
+    measured_orders,
+    plot_work_precision,
+    recommend,
+    setting_label,
+    stalled,
+    write_outputs,
+)
+from ._comparison._timing import MIN_TIMED_S, time_compiled, time_runs
 from ._compile import compiler_options
 from ._diffrax._reference import adaptive_solve, reference_rollout
 from ._inertia import body_inertia
@@ -46,6 +52,38 @@ from ._validation import check_bodies
 from .scenes import SCENES
 from .schemes import SCHEMES
 
+
+# The comparison and its ladders live here; timing, provenance and the report of the rows in
+# `jaxrot._comparison`, re-exported: benchmarks and the fluid and thermal comparisons use them.
+__all__ = [
+    "ADAPTIVE_SOLVERS",
+    "ASYMPTOTIC_ERROR",
+    "DTYPES",
+    "LADDER_FLOOR",
+    "MAX_RUN_S",
+    "MAX_SATURATED_RUNGS",
+    "MIN_TIMED_S",
+    "REFERENCE_TOL",
+    "RESULTS_SCHEMA",
+    "TOLERANCES",
+    "budget_table",
+    "compare",
+    "fit_order",
+    "format_budget_table",
+    "format_recommendation",
+    "format_table",
+    "machine_info",
+    "measured_orders",
+    "orientation_error",
+    "plot_work_precision",
+    "recommend",
+    "relative_energy_drift",
+    "setting_label",
+    "stalled",
+    "time_compiled",
+    "time_runs",
+    "write_outputs",
+]
 
 REFERENCE_TOL = 1e-13
 DTYPES = {"float32": jnp.float32, "float64": jnp.float64}
@@ -70,7 +108,6 @@ ADAPTIVE_SOLVERS = {
 # A fixed-step ladder stops below this error (nothing left to resolve against the reference).
 LADDER_FLOOR = 1e-12
 TOLERANCES = {"float64": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11), "float32": (1e-3, 1e-4, 1e-5, 1e-6)}
-ASYMPTOTIC_ERROR = 0.1  # rad; above this the error saturates and says nothing about the order
 # A fixed-step ladder may halve dt this many times more than `levels` while its error is still above
 # ASYMPTOTIC_ERROR (a first-order scheme on a coarse grid), and ends at a rung whose run takes
 # longer than MAX_RUN_S: the coarsest rung is the same for every scheme, the finest is not.
@@ -93,44 +130,6 @@ def relative_energy_drift(scene, q, omega):
     if energy is None:
         return None
     return float(jnp.max(jnp.abs(energy - energy[0])) / jnp.abs(energy[0]))
-
-
-def fit_order(dts, errors) -> float:
-    """Slope of log(error) against log(dt): the measured order of accuracy."""
-    slope, _ = np.polyfit(np.log(np.asarray(dts)), np.log(np.asarray(errors)), 1)
-    return float(slope)
-
-
-MIN_TIMED_S = 0.2  # a cheap run is repeated until this much time is sampled (at most 100 runs)
-
-
-def time_compiled(fn, arg, repeats, compiler_options=None):
-    """Compile ``fn`` for ``arg``, then time it: (output, compile s, median run s).
-
-    ``compiler_options`` go to ``jax.jit`` (`jaxrot.compiler_options` for jaxrot's programs).
-    Compilation is timed alone (``lower().compile()``); the runs are timed by `time_runs`.
-    """
-    start = time.perf_counter()
-    compiled = jax.jit(fn, compiler_options=compiler_options).lower(arg).compile()
-    compile_s = time.perf_counter() - start
-    out, seconds = time_runs(compiled, (arg,), repeats)
-    return out, compile_s, seconds
-
-
-def time_runs(compiled, args, repeats):
-    """``(output, median run s)`` of a compiled program on ``args``.
-
-    One untimed run first. Then at least ``repeats`` runs, and more until `MIN_TIMED_S`
-    is sampled: a run of a millisecond is at the mercy of the scheduler, and its median
-    over a few samples moved 2× between neighbouring rungs.
-    """
-    out = jax.block_until_ready(compiled(*args))
-    samples = []
-    while len(samples) < repeats or (sum(samples) < MIN_TIMED_S and len(samples) < 100):
-        start = time.perf_counter()
-        jax.block_until_ready(compiled(*args))
-        samples.append(time.perf_counter() - start)
-    return out, statistics.median(samples)
 
 
 class _Problem(NamedTuple):
@@ -400,261 +399,3 @@ def _adaptive_row(problem: _Problem, name, tol, repeats):
     evals = int(round(calls_per_step * mean_steps)) + 1
     method = {"method": name, "kind": "adaptive", "order": order, "dt": None, "tol": tol}
     return _row(p, method, traj, int(round(mean_steps)), evals, seconds, compile_s)
-
-
-def stalled(errors) -> bool:
-    """Whether a ladder (errors in order of halving dt) has reached its floor: the last halving of dt
-    gained less than a factor 2 below `ASYMPTOTIC_ERROR` (the reference's own error, or round-off)."""
-    return len(errors) >= 2 and errors[-1] < ASYMPTOTIC_ERROR and errors[-1] > errors[-2] / 2
-
-
-def measured_orders(rows) -> dict:
-    """Per fixed-step scheme, the fitted order over its rungs between the floor and `ASYMPTOTIC_ERROR`.
-
-    Above `ASYMPTOTIC_ERROR` the error saturates; where a ladder has `stalled`, rungs within a
-    decade of its smallest error carry the floor's error, not the scheme's, and are left out too.
-    None when fewer than three rungs qualify.
-    """
-    orders = {}
-    fixed = [r for r in rows if r.get("kind", "fixed") == "fixed"]
-    for name in dict.fromkeys(r["method"] for r in fixed):
-        ladder = sorted(
-            (r for r in fixed if r["method"] == name and math.isfinite(r["max_orientation_error_rad"])),
-            key=lambda r: -r["dt"],
-        )
-        errors = [r["max_orientation_error_rad"] for r in ladder]
-        floor = 10 * min(errors) if stalled(errors) else 0.0
-        mine = [r for r, e in zip(ladder, errors, strict=True) if floor < e < ASYMPTOTIC_ERROR]
-        errors = [r["max_orientation_error_rad"] for r in mine]
-        orders[name] = fit_order([r["dt"] for r in mine], errors) if len(mine) >= 3 else None
-    return orders
-
-
-def setting_label(row) -> str:
-    """``dt=…`` for a fixed-step row, ``tol=…`` for an adaptive one."""
-    return f"dt={row['dt']:.3g}" if row["kind"] == "fixed" else f"tol={row['tol']:.0e}"
-
-
-def recommend(rows, budgets=None):
-    """For each error budget (rad), the row that meets it at the least wall time per particle.
-
-    Default budgets: every decade from 1e-1 down to the smallest error on the
-    table. Rows whose error is not finite (a step past a scheme's stability limit) meet no
-    budget. Returns a list of ``(budget, row or None)``.
-    """
-    finite = [r for r in rows if math.isfinite(r["max_orientation_error_rad"])]
-    if budgets is None:
-        smallest = min((r["max_orientation_error_rad"] for r in finite), default=1.0)
-        lowest = math.floor(math.log10(max(smallest, 1e-16)))
-        budgets = [10.0**e for e in range(-1, lowest - 1, -1)] if lowest <= -1 else [1e-1]
-    picks = []
-    for budget in budgets:
-        ok = [r for r in finite if r["max_orientation_error_rad"] <= budget]
-        picks.append((budget, min(ok, key=lambda r: r["us_per_particle_run"]) if ok else None))
-    return picks
-
-
-def format_recommendation(rows) -> str:
-    parts = []
-    for budget, row in recommend(rows):
-        if row is None:
-            parts.append(f"≤{budget:.0e}: none")
-        else:
-            parts.append(
-                f"≤{budget:.0e}: {row['method']} {setting_label(row)} ({row['us_per_particle_run']:.3g} µs)"
-            )
-    return "fastest within error budget [rad] (µs per particle over the horizon): " + "; ".join(parts)
-
-
-def budget_table(rows, budgets=None) -> list:
-    """Per error budget, each side's fastest row and how many times faster jaxrot's is.
-
-    Returns ``[(budget, fastest jaxrot row or None, fastest diffrax row or None, ratio or None)]``
-    with ``ratio`` = diffrax's wall time / jaxrot's (> 1: jaxrot is faster), at the budgets of
-    `recommend` over all rows unless ``budgets`` are given.
-    """
-    budgets = [b for b, _ in recommend(rows, budgets)]
-    ours = recommend([r for r in rows if not _is_diffrax(r)], budgets)
-    theirs = recommend([r for r in rows if _is_diffrax(r)], budgets)
-    table = []
-    for (budget, mine), (_, best) in zip(ours, theirs, strict=True):
-        ratio = best["us_per_particle_run"] / mine["us_per_particle_run"] if mine and best else None
-        table.append((budget, mine, best, ratio))
-    return table
-
-
-def _is_diffrax(row) -> bool:
-    """A diffrax solver's row (the ``diffrax_…`` methods: `ADAPTIVE_SOLVERS`, and Kvaerno5 in a fluid)."""
-    return row["method"] in ADAPTIVE_SOLVERS or row["method"].startswith("diffrax_")
-
-
-def format_budget_table(rows) -> str:
-    """`budget_table` as text: one line per budget, the row to pick and its speed-up over diffrax."""
-
-    def pick(row):
-        return (
-            "none"
-            if row is None
-            else f"{row['method']} {setting_label(row)} ({row['us_per_particle_run']:.3g} µs)"
-        )
-
-    head = (
-        f"{'budget [rad]':>12}  {'fastest jaxrot row':<40} {'fastest diffrax row':<40} {'diffrax/jaxrot':>14}"
-    )
-    lines = [head, "-" * len(head)]
-    for budget, mine, best, ratio in budget_table(rows):
-        speed = "—" if ratio is None else f"{ratio:.1f}×"
-        lines.append(f"{budget:>12.0e}  {pick(mine):<40} {pick(best):<40} {speed:>14}")
-    return "\n".join(lines)
-
-
-def _maybe(x):
-    return "—" if x is None else f"{x:.2e}"
-
-
-def format_table(rows) -> str:
-    header = (
-        f"{'method':<15} {'dt | tol':>12} {'steps':>7} {'max q err[rad]':>14} {'|Δω| final':>10} "
-        f"{'rel ΔE':>9} {'torque ev':>9} {'µs/p-step':>9} {'µs/part.':>9} {'compile s':>9}"
-    )
-    lines = [header, "-" * len(header)]
-    for r in rows:
-        lines.append(
-            f"{r['method']:<15} {setting_label(r):>12} {r['n_steps']:>7d} "
-            f"{r['max_orientation_error_rad']:>14.3e} "
-            f"{r['final_omega_error']:>10.2e} {_maybe(r['rel_energy_drift']):>9} {r['torque_evals']:>9d} "
-            f"{r['us_per_particle_step']:>9.4f} {r['us_per_particle_run']:>9.3g} {r['compile_s']:>9.2f}"
-        )
-    for name, order in measured_orders(rows).items():
-        fitted = (
-            f"n/a: fewer than 3 rungs between {ASYMPTOTIC_ERROR} rad and the floor"
-            if order is None
-            else f"{order:.3f}"
-        )
-        nominal = next(r["order"] for r in rows if r["method"] == name)
-        lines.append(f"measured order ({name}): {fitted} (nominal {nominal})")
-    lines.append(format_recommendation(rows))
-    if any(_is_diffrax(r) for r in rows) and not all(_is_diffrax(r) for r in rows):
-        lines += ["", format_budget_table(rows)]
-    return "\n".join(lines)
-
-
-# Version of the provenance block that every results file carries under "machine"; a results file
-# with an older one predates the fields the docs' tables read (tests/test_results.py).
-RESULTS_SCHEMA = 2
-
-
-def _git_commit():
-    """The checkout's commit (``+dirty`` when the package or the benchmarks differ from it), or None
-    outside a git checkout. Docs edited during a run do not mark it."""
-    root = Path(__file__).resolve().parents[1]
-    try:
-        run = lambda *a: subprocess.run(["git", *a], cwd=root, capture_output=True, text=True, timeout=10)  # noqa: E731
-        head = run("rev-parse", "--short=12", "HEAD")
-        if head.returncode != 0:
-            return None
-        dirty = run(
-            "status", "--porcelain", "--untracked-files=no", "--", "jaxrot", "benchmarks"
-        ).stdout.strip()
-        return head.stdout.strip() + ("+dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def machine_info() -> dict:
-    """Where and from what a result was measured: machine, versions, commit, date (UTC), schema."""
-    import diffrax as _diffrax
-
-    return {
-        "schema": RESULTS_SCHEMA,
-        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "commit": _git_commit(),
-        "machine": platform.machine(),
-        "processor": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-        "jaxlib": jax.lib.__version__ if hasattr(jax.lib, "__version__") else None,
-        "diffrax": _diffrax.__version__,
-        "jaxrot": importlib.metadata.version("jaxrot"),
-        "backend": jax.default_backend(),
-        "device": str(jax.devices()[0].device_kind),
-        "xla_flags": os.environ.get("XLA_FLAGS", ""),
-    }
-
-
-def write_outputs(rows, out_dir, plot=True) -> list[Path]:
-    """Write ``compare.csv``, ``compare.json`` and (optionally) ``compare.png`` to ``out_dir``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    written = [out / "compare.csv", out / "compare.json"]
-    with open(written[0], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    recommendation = [
-        {"budget_rad": b, "method": r and r["method"], "setting": r and setting_label(r)}
-        for b, r in recommend(rows)
-    ]
-    with open(written[1], "w") as f:
-        json.dump(
-            {
-                "machine": machine_info(),
-                "orders": measured_orders(rows),
-                "recommendation": recommendation,
-                "rows": rows,
-            },
-            f,
-            indent=2,
-        )
-    if plot:
-        written.append(plot_work_precision(rows, out / "compare.png"))
-    return written
-
-
-def plot_work_precision(rows, path=None, axes=None):
-    """Work-precision plot: error against wall time per particle and against torque evaluations.
-
-    Log-log, one line per method (fixed-step schemes solid with circles, adaptive diffrax
-    dashed with squares), the legend outside the axes. Saves to ``path`` when given; draws on
-    ``axes`` (two Axes) when given.
-    """
-    import matplotlib
-
-    if axes is None:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig = None
-    if axes is None:
-        fig, axes = plt.subplots(1, 2, figsize=(12.5, 4.2), constrained_layout=True)
-    ax_time, ax_evals = axes
-    # Fixed-step schemes: solid, circles, the ten colours of tab10; adaptive solvers: dashed, in
-    # greys with their own markers (with 13 methods one colour cycle would repeat).
-    fixed_styles = iter(dict(marker="o", linestyle="-", color=c) for c in plt.get_cmap("tab10").colors * 2)
-    adaptive_styles = iter(
-        dict(marker=m, linestyle="--", color=c)
-        for m, c in zip("sD^v" * 2, ("black", "dimgray", "darkgray", "silver") * 2, strict=True)
-    )
-    for name in dict.fromkeys(r["method"] for r in rows):
-        mine = [r for r in rows if r["method"] == name]
-        style = dict(next(fixed_styles if mine[0]["kind"] == "fixed" else adaptive_styles), label=name)
-        err = [r["max_orientation_error_rad"] for r in mine]
-        ax_time.loglog([r["us_per_particle_run"] for r in mine], err, **style)
-        ax_evals.loglog([max(r["torque_evals"], 1) for r in mine], err, **style)
-    first = rows[0]
-    ax_time.set(
-        xlabel="wall time per particle over the horizon [µs]",
-        ylabel="max orientation error [rad]",
-        title=f"{first['scene']}, {first['dtype']}, {first['particles']} particles",
-    )
-    ax_evals.set(xlabel="torque evaluations per particle", ylabel="max orientation error [rad]")
-    for ax in axes:
-        ax.grid(True, which="both", alpha=0.3)
-    # Outside the axes: inside, it covered the high-order rows' lower-left corner.
-    ax_evals.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
-    if path is not None:
-        (fig or ax_time.figure).savefig(path, dpi=120)
-    if fig is not None:
-        plt.close(fig)
-    return path

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxrot import analytic, quaternion as quat
-from jaxrot._free_body import _rotor
+from jaxrot._free_body import _rotor, _rotor_loop
 from jaxrot._free_body._rotor import free_rotor, substeps_for
 
 
@@ -246,11 +246,11 @@ def test_any_turn_up_to_ten_rad(body, dtype):
 
 
 def test_gpu_loop_form_any_turn(monkeypatch):
-    """The while loop as traced for a GPU (`_rotor.LOOP_BATCH` = 8 DMV steps per iteration, each
+    """The while loop as traced for a GPU (`_rotor_loop.LOOP_BATCH` = 8 DMV steps per iteration, each
     body's steps past the first two rounded up to a multiple of 8) is exact to round-off at every
     turn up to 10 rad, float64 (`_bound` with the rounded counts), and its steps are the CPU form's
     (same results where the counts agree: ``|ω| t <= 0.4`` and 2 + 8 steps at 2 rad, 10 steps)."""
-    monkeypatch.setattr(_rotor, "LOOP_BATCH", 8)
+    monkeypatch.setattr(_rotor_loop, "LOOP_BATCH", 8)
     moments = jnp.asarray(FAST_BODIES["generic"])
     q, w = _states(8, seed=5)
     turns = np.array([0.3, 0.4, 2.0, 3.15, 6.0, 10.0, 1.0, 2.0])
@@ -272,7 +272,7 @@ def test_gpu_loop_form_any_turn(monkeypatch):
 
 def test_batched_loop_is_each_body_alone():
     """Under `jax.vmap` the extra steps run as one loop over the batch up to the largest count,
-    each body kept once its own count is done (`_rotor._repeat`'s rule). A batch mixing 2 to 50
+    each body kept once its own count is done (`_rotor_loop._repeat`'s rule). A batch mixing 2 to 50
     steps equals each body integrated alone (the same DMV steps in the same order; bounded by a few
     ulp per step, 50 × 4 eps, in case XLA vectorises the arithmetic differently), also when all
     bodies share one count (an unbatched count) and under two nested `vmap`s."""
@@ -307,7 +307,7 @@ def test_gradients_beyond_the_first_steps(monkeypatch, loop_batch):
     derivatives in the moments, ω and t, in reverse and forward mode, at 3 rad per flow (15 steps;
     with 4 steps per loop iteration, the GPU form, 18). Tolerance: the values agree to ~1e-13
     (`_bound`); derivatives amplify the difference by the flow's sensitivity (~turn² here): 1e-9."""
-    monkeypatch.setattr(_rotor, "LOOP_BATCH", loop_batch)
+    monkeypatch.setattr(_rotor_loop, "LOOP_BATCH", loop_batch)
     free_rotor = jax.jit(_rotor.free_rotor.__wrapped__)  # traced afresh, with this loop form
     q0 = jnp.asarray(_states(1, seed=9)[0][0])
 

@@ -7,9 +7,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._free_body._dmv import _turn, _unit_residual
 from .._free_body._free_motion import free_motion
 from .._free_body._principal_axes import principal_axes
-from .._free_body._rotor import _turn, _unit_residual, free_rotor_momentum
+from .._free_body._rotor import free_rotor_momentum
 from .._inertia import body_inertia
 from .._state import RotState
 from ._base import AbstractScheme, world_torque

@@ -1,0 +1,1 @@
+"""The pieces of `jaxrot.comparison`: timing, provenance, and the report of its rows."""
