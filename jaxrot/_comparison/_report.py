@@ -157,15 +157,20 @@ def format_table(rows) -> str:
     return "\n".join(lines)
 
 
+def write_csv(rows, path) -> Path:
+    """``rows`` (dicts with the first row's keys) as a CSV file at ``path``."""
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return Path(path)
+
+
 def write_outputs(rows, out_dir, plot=True) -> list[Path]:
     """Write ``compare.csv``, ``compare.json`` and (optionally) ``compare.png`` to ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    written = [out / "compare.csv", out / "compare.json"]
-    with open(written[0], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    written = [write_csv(rows, out / "compare.csv"), out / "compare.json"]
     recommendation = [
         {"budget_rad": b, "method": r and r["method"], "setting": r and setting_label(r)}
         for b, r in recommend(rows)

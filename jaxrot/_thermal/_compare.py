@@ -11,7 +11,6 @@ twice it the error is noise, not bias) and the cost (median wall time of the com
 `jaxrot.comparison.time_compiled`); the plot draws error against cost, with the statistical floor.
 """
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import comparison, quaternion as quat
+from .._comparison._report import write_csv
 from .._compile import compiler_options
 from .._fluid._overdamped_rollout import overdamped_rollout
 from .._integrate._rollout import rollout
@@ -158,11 +158,7 @@ def write_thermal_outputs(rows, out_dir, plot=True) -> list[Path]:
     """``compare.csv``, ``compare.json`` (with the machine) and ``compare.png`` under ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    written = [out / "compare.csv", out / "compare.json"]
-    with open(written[0], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    written = [write_csv(rows, out / "compare.csv"), out / "compare.json"]
     written[1].write_text(json.dumps({"machine": comparison.machine_info(), "rows": rows}, indent=1) + "\n")
     if plot:
         written.append(plot_weak_errors(rows, out / "compare.png"))
