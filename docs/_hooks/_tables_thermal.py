@@ -18,7 +18,7 @@ def thermal_orders_table(docs, name="thermal_orders.json"):
     data = _read(docs, name)
     rows = []
     for r in data["rows"]:
-        order = "exact" if r["order"] is None and r["exact"] is not None else "—"
+        order = "below noise" if r["order"] is None and r["exact"] is not None else "—"
         if r["order"] is not None:
             order = f"{r['order']:.2f} ± {r['order_stderr']:.2f}"
         if r["exact"] is None:
