@@ -44,7 +44,6 @@ RESULTS = {
     # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
     "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
     "overdamped_cost_cpu.json": (None, "python benchmarks/regenerate.py --only overdamped_cost"),
-    "fluid_race_cpu.json": (None, "python benchmarks/regenerate.py --only fluid_race"),
     # Bodies at a temperature: the thermal schemes and the peers, not jaxrot.SCHEMES.
     "thermal_orders.json": (None, "python benchmarks/regenerate.py --only thermal_orders"),
     "thermal_peers.json": (None, "python benchmarks/regenerate.py --only thermal_peers"),
