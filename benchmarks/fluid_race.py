@@ -369,11 +369,13 @@ def main(argv=None):
                 "rows": [{k: v for k, v in r.items() if k != RERUN} for r in rows],
             }
         )
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "fluid_race_cpu.json").write_text(json.dumps(report, indent=2))
-        plot(report, out / "fluid_race_cpu.png")
-        log(f"wrote {out / 'fluid_race_cpu.json'} and .png")
+        # Written after each Stokes number: a run stopped later keeps what it measured (the file
+        # says which Stokes numbers it holds).
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "fluid_race_cpu.json").write_text(json.dumps(report, indent=2))
+            plot(report, out / "fluid_race_cpu.png")
+            log(f"wrote {out / 'fluid_race_cpu.json'} and .png ({len(report['runs'])} Stokes numbers)")
     return 0
 
 
