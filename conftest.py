@@ -92,6 +92,6 @@ def default_emitters(monkeypatch):
     own ``jax.jit`` in such a test passes `jaxrot.compiler_options()`, which then carries it too.
     """
     if _LOOP_EMITTERS in os.environ.get("XLA_FLAGS", "").split():
-        import jaxrot._compile
+        import jaxrot._core._compile
 
-        monkeypatch.setitem(jaxrot._compile._CPU_OPTIONS, "xla_cpu_use_fusion_emitters", True)
+        monkeypatch.setitem(jaxrot._core._compile._CPU_OPTIONS, "xla_cpu_use_fusion_emitters", True)

@@ -32,10 +32,10 @@ import numpy as np
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot._fluid._fluid import check_fluid
-from jaxrot._fluid._overdamped import OVERDAMPED_SCHEMES
-from jaxrot._fluid._overdamped_rollout import velocity_field
+from jaxrot._integrate._overdamped import velocity_field
 from jaxrot.comparison import machine_info
 from jaxrot.schemes._exponential import FluidArgs
+from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
 
 
 ROOT = Path(__file__).resolve().parents[1]

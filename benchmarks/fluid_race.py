@@ -48,11 +48,11 @@ from race import seconds_of_one_run as seconds_of, step_ladder, timed  # noqa: E
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot._diffrax._reference import adaptive_solve
-from jaxrot._fluid._compare import inertial_runner, overdamped_runner, plain_fluid_torque
-from jaxrot._fluid._overdamped import OVERDAMPED_SCHEMES
 from jaxrot._particles import PARTICLES
 from jaxrot.comparison import machine_info
+from jaxrot.comparison._fluid import inertial_runner, overdamped_runner, plain_fluid_torque
 from jaxrot.scenes import spheroid_shear
+from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
 
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -31,9 +31,9 @@ from throughput import DT, bodies, have_jax_md, jax_md_run, jaxrot_run
 
 import jaxrot
 from jaxrot import quaternion as quat
+from jaxrot._core._math import taylor_threshold
+from jaxrot._core._trig import sincos
 from jaxrot._inertia import body_inertia
-from jaxrot._math import taylor_threshold
-from jaxrot._trig import sincos
 from jaxrot.comparison import machine_info, time_runs
 from jaxrot.schemes import resolve_scheme
 

@@ -2,7 +2,7 @@
 
 Issue 54 asks that the overdamped model cost no more per step than ``zhao``. Both run the
 ``spheroid_shear`` scene's body (a prolate spheroid in simple shear): ``zhao`` the inertial model
-with the fluid's torque as a plain callable (`jaxrot._fluid._compare.plain_fluid_torque`), the
+with the fluid's torque as a plain callable (`jaxrot.comparison._fluid.plain_fluid_torque`), the
 overdamped schemes (Lie–Euler, Lie midpoint, RKMK4 in the exponential and the Cayley chart) the
 orientation alone, on ``N`` copies of the body, ``STEPS`` steps saving only the end. Timed through
 the public entry points, compiled, in interleaved rounds (the median of each), float64.
@@ -23,10 +23,10 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 
 import jaxrot  # noqa: E402
-from jaxrot._fluid._compare import plain_fluid_torque  # noqa: E402
-from jaxrot._fluid._overdamped import OVERDAMPED_SCHEMES  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
+from jaxrot.comparison._fluid import plain_fluid_torque  # noqa: E402
 from jaxrot.scenes import spheroid_shear  # noqa: E402
+from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES  # noqa: E402
 
 
 STEPS = 200

@@ -51,7 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrot
-import jaxrot._fusion
+import jaxrot._core._fusion
 from jaxrot import quaternion as quat
 from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot._inertia import body_inertia
@@ -398,10 +398,10 @@ def main():
         Path(opts.out).mkdir(parents=True, exist_ok=True)
         table_from_log(opts.from_log, opts.dtype, opts.out)
         return
-    jaxrot._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[opts.barriers]
+    jaxrot._core._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[opts.barriers]
     out = Path(opts.out)
     out.mkdir(parents=True, exist_ok=True)
-    info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
+    info = machine_info() | {"stage_barriers": jaxrot._core._fusion._barriers()}
     print(f"machine: {info}")
     report = {"machine": info, "options": vars(opts), "scenes": {}}
     schemes = opts.schemes.split(",") if opts.schemes else None

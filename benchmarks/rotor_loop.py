@@ -65,7 +65,7 @@ def main():
     state = random_bodies(scene, opts.n, jnp.float64)
     steps_list = [int(s) for s in opts.steps.split(",")]
     batches = [int(b) for b in opts.batches.split(",")]
-    info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
+    info = machine_info() | {"stage_barriers": jaxrot._core._fusion._barriers()}
     print(f"machine: {info}\nN = {opts.n}")
     rows, first = [], {}
     settings = [(b, b, None, None) for b in batches]

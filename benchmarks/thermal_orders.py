@@ -2,7 +2,7 @@
 
 For each scheme of `jaxrot.THERMAL_SCHEMES` (underdamped Langevin) and `jaxrot.BROWNIAN_SCHEMES`
 (overdamped), and each oracle, the bias of an ensemble average at six steps, each half the last,
-with one refined Brownian path per body for all six (`jaxrot._thermal._weak`: coupled levels, so the
+with one refined Brownian path per body for all six (`jaxrot.comparison._weak`: coupled levels, so the
 differences between levels carry small statistical errors); the weak order is the slope of
 ``log |E_h − E_{h/2}|`` against ``log h`` over the levels where that difference exceeds three standard
 errors, and the finest level extrapolated by Richardson's rule is compared with the closed form.
@@ -38,8 +38,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 
 import jaxrot
-from jaxrot._thermal import _problems as problems, _weak as weak
-from jaxrot.comparison import machine_info
+from jaxrot.comparison import _thermal_problems as problems, _weak as weak, machine_info
 
 
 ROOT = Path(__file__).resolve().parents[1]

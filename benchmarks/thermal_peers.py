@@ -56,7 +56,7 @@ import numpy as np
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._thermal._oracles import dipole_orientations, langevin_function, maxwell_spins
+from jaxrot._fluid._equilibrium import dipole_orientations, langevin_function, maxwell_spins
 from jaxrot.comparison import machine_info, time_compiled
 
 

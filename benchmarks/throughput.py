@@ -30,7 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 import jaxrot
-import jaxrot._fusion
+import jaxrot._core._fusion
 from jaxrot import quaternion as quat
 from jaxrot.comparison import machine_info, time_compiled
 from jaxrot.scenes import heavy_top
@@ -103,7 +103,7 @@ def have_jax_md():
 
 
 def machine():
-    info = machine_info() | {"stage_barriers": jaxrot._fusion._barriers()}
+    info = machine_info() | {"stage_barriers": jaxrot._core._fusion._barriers()}
     if have_jax_md():
         import importlib.metadata
 
@@ -200,7 +200,7 @@ def main(argv=None):
         "--barriers", choices=["auto", "on", "off"], default="auto", help="`stage` barriers (auto: CPU only)"
     )
     ns = parser.parse_args(argv)
-    jaxrot._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[ns.barriers]
+    jaxrot._core._fusion.BARRIERS = {"auto": None, "on": True, "off": False}[ns.barriers]
     sizes = [int(float(x)) for x in ns.n.split(",")]
     dtypes = ns.dtype.split(",")
     schemes = ns.schemes.split(",")

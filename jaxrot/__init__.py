@@ -17,7 +17,7 @@ from . import (
     stability as stability,
     torques as torques,
 )
-from ._compile import compiler_options as compiler_options
+from ._core._compile import compiler_options as compiler_options
 from ._diffrax._reference import reference_rollout as reference_rollout
 from ._diffrax._solver import solver as solver
 from ._diffrax._term import RigidBodyTerm as RigidBodyTerm
@@ -29,8 +29,6 @@ from ._fit import (
     identify as identify,
 )
 from ._fluid._fluid import Fluid as Fluid
-from ._fluid._overdamped import OVERDAMPED_SCHEMES as OVERDAMPED_SCHEMES
-from ._fluid._overdamped_rollout import overdamped_rollout as overdamped_rollout
 from ._inertia import (
     BodyInertia as BodyInertia,
     MathematicalBody as MathematicalBody,
@@ -43,11 +41,11 @@ from ._integrate._chunked import (
     save_checkpoint as save_checkpoint,
 )
 from ._integrate._drive import Drive as Drive
+from ._integrate._overdamped import overdamped_rollout as overdamped_rollout
 from ._integrate._rollout import rollout as rollout
 from ._integrate._runtime_check import IntegrationError as IntegrationError
 from ._particles import per_body as per_body
 from ._state import RotState as RotState, Trajectory as Trajectory
-from ._thermal._brownian import BROWNIAN_SCHEMES as BROWNIAN_SCHEMES
 from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import (
     FLUID_SCHEMES as FLUID_SCHEMES,
@@ -55,6 +53,8 @@ from .schemes import (
     THERMAL_SCHEMES as THERMAL_SCHEMES,
     AbstractScheme as AbstractScheme,
 )
+from .schemes._brownian import BROWNIAN_SCHEMES as BROWNIAN_SCHEMES
+from .schemes._overdamped import OVERDAMPED_SCHEMES as OVERDAMPED_SCHEMES
 
 
 __version__ = importlib.metadata.version("jaxrot")

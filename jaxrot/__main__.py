@@ -72,15 +72,15 @@ def main(argv=None) -> int:
             scene = factory()
             print(f"{name:<26} {scene.n_bodies:>4} bodies  {scene.description}")
         return 0
-    if ns.scene in THERMAL_SCENES:  # weak errors of ensemble averages: `jaxrot._thermal._compare`
-        from ._thermal._compare import main_thermal
+    if ns.scene in THERMAL_SCENES:  # weak errors of ensemble averages: `jaxrot.comparison._thermal`
+        from .comparison._thermal import main_thermal
 
         return main_thermal(ns, parser)
     ns.particles = 100 if ns.particles is None else ns.particles
     from .comparison import compare, format_table, machine_info, write_outputs
 
     if ns.scene in FLUID_SCENES:  # its own rows: the fluid schemes, the overdamped ones, Kvaerno5
-        from ._fluid._compare import compare_fluid as compare
+        from .comparison._fluid import compare_fluid as compare
 
     start = time.perf_counter()
     try:

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._concrete import is_concrete as is_concrete
+from ._core._concrete import is_concrete as is_concrete
 from ._inertia import MathematicalBody
 from ._state import RotState
 

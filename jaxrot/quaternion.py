@@ -26,9 +26,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._concrete import is_concrete
-from ._math import safe_norm, taylor_threshold
-from ._trig import sincos
+from ._core._concrete import is_concrete
+from ._core._math import safe_norm, taylor_threshold
+from ._core._trig import sincos
 
 
 __all__ = [

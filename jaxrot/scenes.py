@@ -26,10 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import quaternion as quat
+from ._fluid._equilibrium import dipole_orientations, maxwell_spins
 from ._fluid._fluid import Fluid
 from ._particles import per_body
 from ._state import RotState
-from ._thermal._oracles import dipole_orientations, maxwell_spins
 from .diagnostics import kinetic_energy
 from .torques import DipoleInteraction, Gravity, RotatingField, UniformField, ViscousDrag
 

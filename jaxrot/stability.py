@@ -51,8 +51,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import quaternion as quat
+from ._core._limits import LIMITS
 from ._integrate._rollout import rollout
-from ._limits import LIMITS
 from ._state import RotState
 from .analytic import free_top
 from .diagnostics import angular_momentum, kinetic_energy

@@ -314,13 +314,13 @@ def test_fit_order_recovers_a_known_slope():
 def test_each_fixed_step_ladder_compiles_one_program(monkeypatch):
     """dt and the step count are runtime values of one program per scheme, not one program per rung."""
     built = []
-    original = comparison._fixed_runner
+    original = comparison._ladder._fixed_runner
 
     def counting(problem, scheme):
         built.append(scheme.name)
         return original(problem, scheme)
 
-    monkeypatch.setattr(comparison, "_fixed_runner", counting)
+    monkeypatch.setattr(comparison._ladder, "_fixed_runner", counting)
     rows = compare(
         t_end=0.2, particles=1, coarse_steps=5, levels=3, schemes=["zhao", "rkmk4"], solvers=[],
         repeats=1, progress=False,

@@ -1,4 +1,4 @@
-"""jaxrot's own compiler options (`jaxrot._compile`): passed at top level, never nested."""
+"""jaxrot's own compiler options (`jaxrot._core._compile`): passed at top level, never nested."""
 
 import equinox as eqx
 import jax
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxrot
-from jaxrot import _compile
+from jaxrot._core import _compile
 from jaxrot._integrate import _run
 
 

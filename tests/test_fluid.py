@@ -21,9 +21,9 @@ import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot._fluid._flow import body_flow, flow_rotation
 from jaxrot._fluid._fluid import check_fluid
-from jaxrot._fluid._overdamped import OVERDAMPED_SCHEMES
-from jaxrot._fluid._overdamped_rollout import velocity_field
+from jaxrot._integrate._overdamped import velocity_field
 from jaxrot.schemes._exponential import FluidArgs
+from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
 from jaxrot.schemes._phi import phi_functions
 
 

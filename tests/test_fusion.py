@@ -1,4 +1,4 @@
-"""The compiled step does each expensive thing once (`jaxrot._fusion`, `jaxrot._trig`)."""
+"""The compiled step does each expensive thing once (`jaxrot._core._fusion`, `jaxrot._core._trig`)."""
 
 import jax
 import jax.numpy as jnp
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import jaxrot
-import jaxrot._fusion
-from jaxrot._fusion import stage, stage_stacked
+import jaxrot._core._fusion
+from jaxrot._core._fusion import stage, stage_stacked
 from jaxrot.scenes import heavy_top
 
 
@@ -56,7 +56,7 @@ def test_stage_is_the_identity_for_values_gradients_and_batching(barrier):
 @pytest.mark.parametrize("setting, placed", [(None, True), (True, True), (False, False)])
 def test_barriers_are_placed_when_tracing_for_cpu_or_when_forced(setting, placed, monkeypatch):
     # On a GPU fusion wins (docs/performance.md, "On a GPU"): `None` places them for CPU only.
-    monkeypatch.setattr(jaxrot._fusion, "BARRIERS", setting)
+    monkeypatch.setattr(jaxrot._core._fusion, "BARRIERS", setting)
     text = str(jax.make_jaxpr(lambda x: stage(jnp.sin(x)))(jnp.ones(3)))
     assert ("optimization_barrier" in text) == placed
     if setting is None:

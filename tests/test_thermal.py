@@ -28,10 +28,10 @@ from scipy.linalg import expm
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._thermal import _problems as problems, _weak as weak
-from jaxrot._thermal._heat_kernel import heat_kernel_half_angle, heat_kernel_rotation
-from jaxrot._thermal._oracles import axis_correlation, dipole_orientations, langevin_function, maxwell_spins
-from jaxrot._thermal._ou import integrated_spin, spin_relaxation
+from jaxrot._fluid._equilibrium import axis_correlation, dipole_orientations, langevin_function, maxwell_spins
+from jaxrot.comparison import _thermal_problems as problems, _weak as weak
+from jaxrot.schemes._heat_kernel import heat_kernel_half_angle, heat_kernel_rotation
+from jaxrot.schemes._ou import integrated_spin, spin_relaxation
 
 
 KEY = jax.random.key(20261127)

@@ -1,11 +1,11 @@
-"""`jaxrot._trig.sincos`: the vectorisable float64 sine and cosine used in the hot loops."""
+"""`jaxrot._core._trig.sincos`: the vectorisable float64 sine and cosine used in the hot loops."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxrot._trig import sincos
+from jaxrot._core._trig import sincos
 
 
 def ulps(got, want):

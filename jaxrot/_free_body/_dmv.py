@@ -9,7 +9,7 @@ components (`jaxrot._free_body._rotor` explains the method, its accuracy and its
 import jax.numpy as jnp
 from jax import lax
 
-from .._fusion import stage
+from .._core._fusion import stage
 
 
 _SWEEPS = 2

@@ -86,7 +86,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._fusion import stage, stage_stacked
+from .._core._fusion import stage, stage_stacked
 from ._dmv import (
     _MAX_ROUNDING,
     _MAX_ROUNDING_ULP,
@@ -149,7 +149,7 @@ def _dmv_flow(q, m, inertia, inverse, targets, total_angle, t, substeps, dtype):
     g = 0.5 * h
     g2 = g * g
     angle = total_angle / jnp.asarray(count).astype(dtype)  # of one DMV step
-    # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes the earlier stages inside
+    # Stage boundaries (`jaxrot._core._fusion`): without them XLA recomputes the earlier stages inside
     # every later one (measured 8x slower), and in the derivative programs too.
     staged = stage(*q, *m, *targets, *sizes, angle)
     q, m, targets, sizes, angle = staged[:4], staged[4:7], staged[7:9], staged[9:11], staged[11]

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._fusion import tracing_for_cpu
+from .._core._fusion import tracing_for_cpu
 from ._dmv import _dmv_step
 
 

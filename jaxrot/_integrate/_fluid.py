@@ -4,9 +4,9 @@ import math
 
 from .._fluid._fluid import check_fluid
 from .._inertia import is_diagonal_form
-from .._thermal._bind import bind_thermal, is_langevin, without_temperature
 from ..schemes import FLUID_SCHEMES
 from ..schemes._exponential import FluidArgs
+from ._thermal_bind import bind_thermal, is_langevin, without_temperature
 
 
 def _capable():

@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .._compile import filter_jit
+from .._core._compile import filter_jit
 from .._inertia import body_inertia
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState, Trajectory
@@ -172,7 +172,7 @@ def prepare_run(
     )
 
 
-@filter_jit  # with jaxrot's compiler options when called at top level (`jaxrot._compile`)
+@filter_jit  # with jaxrot's compiler options when called at top level (`jaxrot._core._compile`)
 def _rollout_flat(
     scheme,
     state,

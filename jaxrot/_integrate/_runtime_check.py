@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._limits import LIMITS
+from .._core._limits import LIMITS
 from .._validation import QUATERNION_NORM_TOL
 
 

@@ -2,7 +2,6 @@
 
 from types import MappingProxyType
 
-from .._thermal._bind import THERMAL_SCHEMES as THERMAL_SCHEMES
 from ._base import AbstractScheme as AbstractScheme
 from ._exponential import (
     AbstractExponentialLieRK as AbstractExponentialLieRK,
@@ -14,7 +13,9 @@ from ._lie_runge_kutta import (
     LieRungeKuttaCarry as LieRungeKuttaCarry,
 )
 from ._rkn_splitting import AbstractRKNSplitting as AbstractRKNSplitting
+from .baoab import BAOAB as BAOAB
 from .euler import Euler as Euler
+from .exp_euler import ExpEuler as ExpEuler
 from .exp_midpoint import ExpMidpoint as ExpMidpoint
 from .exp_rk4 import ExpRK4 as ExpRK4
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
@@ -50,6 +51,9 @@ SCHEMES = MappingProxyType(
 # named by `jaxrot.rollout` like the others, kept out of `SCHEMES`, whose every member the
 # results files under docs/ cover.
 FLUID_SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (ExpMidpoint(), ExpRK4())})
+
+# The schemes of `jaxrot.rollout` that integrate the thermal torque (underdamped Langevin).
+THERMAL_SCHEMES = MappingProxyType({s.name: s for s in (BAOAB(), ExpEuler())})
 
 
 def resolve_scheme(scheme) -> AbstractScheme:

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
-from .._fusion import stage
+from .._core._fusion import stage
 from .._inertia import BodyInertia
 from .._state import RotState
 

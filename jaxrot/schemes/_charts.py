@@ -7,8 +7,8 @@ differential ``dψ⁻¹`` (Iserles, Munthe-Kaas, Nørsett and Zanna, Acta Numeri
 
 import jax.numpy as jnp
 
-from .._math import taylor_threshold
-from .._trig import sincos
+from .._core._math import taylor_threshold
+from .._core._trig import sincos
 from ..quaternion import cayley
 
 

@@ -54,8 +54,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._core._fusion import stage
 from .._fluid._flow import body_flow
-from .._fusion import stage
 from .._inertia import body_inertia
 from .._state import RotState
 from ._base import AbstractScheme, world_torque
@@ -268,7 +268,7 @@ class AbstractExponentialLieRK(AbstractScheme):
                 part = _sum(weights, values)
                 if part is not None:
                     theta = theta + scale * part
-            # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes earlier stages in later ones.
+            # Stage boundaries (`jaxrot._core._fusion`): without them XLA recomputes earlier stages later.
             theta, deviation = stage(theta, deviation)
             rotation, chart_scalar = stage(*chart(theta))
             q_i = stage(quat.multiply(q0, rotation))

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._fusion import stage
+from .._core._fusion import stage
 from .._inertia import body_inertia
 from .._state import RotState
 from ..quaternion import conjugate, multiply, normalize, rotate

@@ -6,11 +6,11 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._core._fusion import stage
+from .._core._trig import sincos
 from .._free_body._principal_axes import principal_axes
-from .._fusion import stage
 from .._inertia import BodyInertia, body_inertia
 from .._state import RotState
-from .._trig import sincos
 from ._base import AbstractScheme, world_torque
 
 
@@ -151,7 +151,7 @@ class NoSquish(AbstractScheme):
         moments, r = carry.moments, carry.principal_to_body
         inv_moments = _inverse_moments(moments)
         half = 0.5 * dt
-        # Stage boundaries (`jaxrot._fusion`): see `_free_rotor`.
+        # Stage boundaries (`jaxrot._core._fusion`): see `_free_rotor`.
         q, p = (
             carry.q_principal,
             stage(self._kick(carry.q_principal, carry.momentum, carry.torque, moments, half)),

@@ -3,7 +3,7 @@
 from typing import ClassVar
 
 from .. import quaternion as quat
-from .._fusion import stage
+from .._core._fusion import stage
 from .._inertia import body_inertia
 from .._state import RotState
 from ._base import AbstractScheme, body_torque
@@ -56,7 +56,7 @@ class Zhao(AbstractScheme):
 
         omega_b0 = quat.rotate(to_body, omega0)
         tau_b0 = body_torque(torque, t, q0, omega0, args)
-        # Stage boundaries (`jaxrot._fusion`): without them XLA recomputes each stage in every
+        # Stage boundaries (`jaxrot._core._fusion`): without them XLA recomputes each stage in every
         # later one, and the step ran 3× slower.
         omega_b0, accel_b0 = stage(omega_b0, inertia.angular_acceleration(omega_b0, tau_b0))
 

@@ -20,14 +20,16 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from .. import comparison, quaternion as quat
-from .._comparison._report import write_csv
-from .._compile import compiler_options
-from .._fluid._overdamped_rollout import overdamped_rollout
+from .. import quaternion as quat
+from .._core._compile import compiler_options
+from .._fluid._equilibrium import langevin_function
+from .._integrate._overdamped import overdamped_rollout
 from .._integrate._rollout import rollout
-from ._bind import THERMAL_SCHEMES
-from ._brownian import BROWNIAN_SCHEMES
-from ._oracles import langevin_function
+from ..scenes import THERMAL_SCENES
+from ..schemes import THERMAL_SCHEMES
+from ..schemes._brownian import BROWNIAN_SCHEMES
+from . import _ladder as comparison
+from ._report import write_csv
 
 
 def _exact(scene):
@@ -69,8 +71,6 @@ def _runner(name, scene, dt, n_steps, samples, key):
 def compare_thermal(scene="magnetic_nanoparticles", *, t_end=None, particles=4096, dtype="float64",
                     coarse_steps=4, levels=5, schemes=None, repeats=3, progress=True):  # fmt: skip
     """The rows of the weak-error comparison (see the module) of a scene of `THERMAL_SCENES`."""
-    from ..scenes import THERMAL_SCENES
-
     if dtype not in comparison.DTYPES:
         raise ValueError(f"`dtype` must be one of {sorted(comparison.DTYPES)}; got {dtype!r}.")
     run_scene = THERMAL_SCENES[scene](comparison.DTYPES[dtype], n=particles)

@@ -1,4 +1,4 @@
-"""The thermal oracles as problems for the weak-error ladder (`jaxrot._thermal._weak`).
+"""The thermal oracles as problems for the weak-error ladder (`jaxrot.comparison._weak`).
 
 Each builder takes a scheme (one of `jaxrot.THERMAL_SCHEMES` or `jaxrot.BROWNIAN_SCHEMES`), a number
 of bodies, a key for the initial state and a dtype, and returns a `WeakProblem` with its closed form:
@@ -18,14 +18,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._fluid._equilibrium import axis_correlation, dipole_orientations, langevin_function, maxwell_spins
 from .._fluid._fluid import Fluid
-from .._fluid._overdamped_rollout import velocity_field
 from .._inertia import body_inertia
+from .._integrate._overdamped import velocity_field
 from .._state import RotState
+from ..schemes._brownian import AbstractBrownianScheme, for_steps
+from ..schemes._langevin import LangevinCarry
 from ..torques import UniformField
-from ._brownian import AbstractBrownianScheme, for_steps
-from ._langevin import LangevinCarry
-from ._oracles import axis_correlation, dipole_orientations, langevin_function, maxwell_spins
 from ._weak import WeakProblem
 
 

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 
 from .. import quaternion as quat
 from .._state import RotState
-from ..schemes._base import world_torque
+from ._base import world_torque
 from ._langevin import AbstractLangevinScheme, LangevinCarry, body_flow_rotation
 from ._ou import integrated_spin
 
@@ -17,7 +17,7 @@ class ExpEuler(AbstractLangevinScheme):
     With the applied and gyroscopic torques frozen at the start of the step, each principal axis's
     spin is an Ornstein–Uhlenbeck process around the slow velocity
     ``S = g(q) + ζ⁻¹ ⊙ (τ_b − u × I u)``, and the spin together with the angle it turns through is
-    Gaussian with a known mean and covariance (`jaxrot._thermal._ou.integrated_spin`): the step
+    Gaussian with a known mean and covariance (`jaxrot.schemes._ou.integrated_spin`): the step
     draws both, exactly, and turns the body by that angle, ``q₁ = q ⊗ exp(θ)``. So the friction's
     relaxation and the noise it balances are exact at any ``ζΔt/I``: as ``ζΔt/I → ∞`` the step
     becomes the geometric Euler–Maruyama step of the overdamped model (`jaxrot.overdamped_rollout`'s

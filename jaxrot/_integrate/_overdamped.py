@@ -7,11 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
-from .._compile import filter_jit
-from .._integrate._runtime_check import IntegrationError, nonfinite_message
+from .._core._compile import filter_jit
+from .._fluid._flow import flow_rotation
+from .._fluid._fluid import check_fluid
 from .._particles import PARTICLES, split_per_body, unflatten_trajectory
 from .._state import Trajectory
-from .._thermal._bind import brownian_scheme, brownian_start, without_temperature
 from .._validation import (
     QUATERNION_NORM_TOL,
     check_run_times,
@@ -21,10 +21,10 @@ from .._validation import (
     is_concrete,
 )
 from ..schemes._base import world_torque
+from ..schemes._overdamped import resolve_overdamped
 from ..schemes._rkn_splitting import uses_omega
-from ._flow import flow_rotation
-from ._fluid import check_fluid
-from ._overdamped import resolve_overdamped
+from ._runtime_check import IntegrationError, nonfinite_message
+from ._thermal_bind import brownian_scheme, brownian_start, without_temperature
 
 
 def overdamped_rollout(

@@ -7,7 +7,7 @@ import equinox as eqx
 from .. import quaternion as quat
 from .._free_body._rotor import free_rotor
 from .._state import RotState
-from ..schemes._base import world_torque
+from ._base import world_torque
 from ._langevin import AbstractLangevinScheme, LangevinCarry, body_flow_rotation, kick
 from ._ou import spin_relaxation
 
@@ -21,7 +21,7 @@ class BAOAB(AbstractLangevinScheme):
     2. A: free rotation over ``Δt/2`` by the exact rotor (`jaxrot._free_body._rotor.free_rotor`,
        the preprocessed discrete Moser–Veselov map: exact to round-off);
     3. O: the spin's exact Ornstein–Uhlenbeck flow over ``Δt`` at fixed orientation, about each
-       principal axis (`jaxrot._thermal._ou.spin_relaxation`): relaxed towards the flow's rotation at
+       principal axis (`jaxrot.schemes._ou.spin_relaxation`): relaxed towards the flow's rotation at
        ``exp(−ζ_k Δt / I_k)`` with the noise that keeps ``⟨I_k ω_k²⟩ = kT``;
     4. A: free rotation over ``Δt/2``;
     5. B: ``τ₁ = T(t + Δt, q₁, ω̃)`` (``ω̃`` after a predictor half kick by ``τ``, so that a torque

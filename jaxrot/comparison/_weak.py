@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._noise import body_keys, step_normals
+from ..schemes._noise import body_keys, step_normals
 
 
 class WeakProblem(NamedTuple):

@@ -40,7 +40,7 @@ def stage(*values):
 
     Example:
         >>> import jax.numpy as jnp
-        >>> from jaxrot._fusion import stage
+        >>> from jaxrot._core._fusion import stage
         >>> stage(jnp.arange(3.0)).tolist()
         [0.0, 1.0, 2.0]
     """
@@ -59,7 +59,7 @@ def stage_stacked(*values):
 
     Example:
         >>> import jax.numpy as jnp
-        >>> from jaxrot._fusion import stage_stacked
+        >>> from jaxrot._core._fusion import stage_stacked
         >>> [v.tolist() for v in stage_stacked(jnp.arange(2.0), jnp.ones(2))]
         [[0.0, 1.0], [1.0, 1.0]]
     """

@@ -20,17 +20,19 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from .. import comparison, quaternion as quat
-from .._compile import compiler_options
+from .. import quaternion as quat
+from .._core._compile import compiler_options
 from .._diffrax._reference import adaptive_solve
+from .._fluid._fluid import check_fluid
 from .._inertia import body_inertia
+from .._integrate._overdamped import velocity_field
 from .._particles import PARTICLES
 from .._state import RotState, Trajectory
+from ..scenes import FLUID_SCENES
 from ..schemes import FLUID_SCHEMES
 from ..schemes._exponential import FluidArgs
-from ._fluid import check_fluid
-from ._overdamped import OVERDAMPED_SCHEMES
-from ._overdamped_rollout import velocity_field
+from ..schemes._overdamped import OVERDAMPED_SCHEMES
+from . import _ladder as comparison
 
 
 DIFFRAX_SOLVERS = {
@@ -171,8 +173,6 @@ def compare_fluid(
     progress=True,
 ):
     """`jaxrot.comparison.compare` for a scene of `jaxrot.scenes.FLUID_SCENES` (see the module)."""
-    from ..scenes import FLUID_SCENES
-
     if dtype not in comparison.DTYPES:
         raise ValueError(f"`dtype` must be one of {sorted(comparison.DTYPES)}; got {dtype!r}.")
     ref_scene, run_scene = FLUID_SCENES[scene](jnp.float64), FLUID_SCENES[scene](comparison.DTYPES[dtype])

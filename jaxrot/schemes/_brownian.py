@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
-from .._fusion import stage
+from .._core._fusion import stage
 from .._validation import is_concrete
 from ._heat_kernel import SMALL_STEP, heat_kernel_rotation
 from ._noise import step_normals
@@ -85,7 +85,7 @@ class AbstractBrownianScheme(eqx.Module):
 
 
 def _body_turn(q, rotvec_body):
-    # Stage boundary (`jaxrot._fusion`): XLA otherwise copies each product's expression tree into the
+    # Stage boundary (`jaxrot._core._fusion`): XLA otherwise copies each product's expression tree into the
     # four components of the next (five chained turns ran 400x slower).
     return stage(quat.multiply(q, quat.exp(rotvec_body)))
 

@@ -28,7 +28,7 @@ import math
 
 import jax.numpy as jnp
 
-from ..schemes._phi import phi_functions
+from ._phi import phi_functions
 
 
 def _v_series_terms(dtype) -> int:

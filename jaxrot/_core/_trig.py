@@ -80,7 +80,7 @@ def sincos(x):
 
     Example:
         >>> import jax.numpy as jnp
-        >>> from jaxrot._trig import sincos
+        >>> from jaxrot._core._trig import sincos
         >>> s, c = sincos(jnp.array([0.0, 0.5]))
         >>> bool(jnp.allclose(s, jnp.sin(jnp.array([0.0, 0.5])))), c.shape
         (True, (2,))

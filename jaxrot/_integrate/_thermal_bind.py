@@ -1,7 +1,5 @@
 """A rollout at a temperature: the scheme that takes the noise, and the per-body keys it draws from."""
 
-from types import MappingProxyType
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -9,15 +7,16 @@ import numpy as np
 
 from .._particles import unwrap_per_body
 from .._validation import check_values
-from ._baoab import BAOAB
-from ._brownian import BROWNIAN_SCHEMES, DEFAULT_BROWNIAN, AbstractBrownianScheme, BrownianStart, for_steps
-from ._exp_euler import ExpEuler
-from ._langevin import AbstractLangevinScheme, ThermalArgs
-from ._noise import body_keys, check_key
-
-
-# The schemes of `jaxrot.rollout` that integrate the thermal torque (underdamped Langevin).
-THERMAL_SCHEMES = MappingProxyType({s.name: s for s in (BAOAB(), ExpEuler())})
+from ..schemes import THERMAL_SCHEMES
+from ..schemes._brownian import (
+    BROWNIAN_SCHEMES,
+    DEFAULT_BROWNIAN,
+    AbstractBrownianScheme,
+    BrownianStart,
+    for_steps,
+)
+from ..schemes._langevin import AbstractLangevinScheme, ThermalArgs
+from ..schemes._noise import body_keys, check_key
 
 
 def _names(registry):
@@ -58,7 +57,7 @@ def brownian_scheme(scheme, key, fluid, dt):
     """The Brownian scheme ``scheme`` names (None with a ``key``: the default), or None (a deterministic
     overdamped scheme, which `jaxrot.overdamped_rollout` resolves). ``fluid`` and ``dt`` as the caller
     gave them (unchecked): where they are concrete, the scheme leaves out what their steps cannot
-    need (`jaxrot._thermal._brownian.for_steps`)."""
+    need (`jaxrot.schemes._brownian.for_steps`)."""
     if isinstance(scheme, str) and scheme in BROWNIAN_SCHEMES:
         scheme = BROWNIAN_SCHEMES[scheme]
     elif scheme is None and key is not None:

@@ -10,7 +10,7 @@ frictions and ``W`` a standard Wiener process in the body frame. Its stationary 
 distribution: the Maxwell law ``u_k ~ N(0, kT/I_k)`` on each axis (equipartition) and
 ``exp(−U(q)/kT)`` over orientations for a torque ``τ = −∇U``. A scheme advances one body with
 ``advance``, given the step's standard normals (``normals_per_step`` of them; None: no noise);
-`step` draws them from the body's key and the step counter it carries (`jaxrot._thermal._noise`).
+`step` draws them from the body's key and the step counter it carries (`jaxrot.schemes._noise`).
 """
 
 import abc
@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from .. import quaternion as quat
 from .._fluid._flow import flow_rotation
 from .._state import RotState
-from ..schemes._base import AbstractScheme
+from ._base import AbstractScheme
 from ._noise import step_normals
 
 

@@ -26,64 +26,21 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from . import quaternion as quat
-from ._comparison._provenance import RESULTS_SCHEMA, machine_info
-from ._comparison._report import (
+from .. import quaternion as quat
+from .._core._compile import compiler_options
+from .._diffrax._reference import adaptive_solve, reference_rollout
+from .._inertia import body_inertia
+from .._particles import PARTICLES, flatten_particles, split_per_body
+from .._state import RotState
+from .._validation import check_bodies
+from ..scenes import SCENES
+from ..schemes import SCHEMES
+from ._report import (
     ASYMPTOTIC_ERROR,
-    budget_table,
-    fit_order,
-    format_budget_table,
-    format_recommendation,
-    format_table,
-    measured_orders,
-    plot_work_precision,
-    recommend,
-    setting_label,
     stalled,
-    write_outputs,
 )
-from ._comparison._timing import MIN_TIMED_S, time_compiled, time_runs
-from ._compile import compiler_options
-from ._diffrax._reference import adaptive_solve, reference_rollout
-from ._inertia import body_inertia
-from ._particles import PARTICLES, flatten_particles, split_per_body
-from ._state import RotState
-from ._validation import check_bodies
-from .scenes import SCENES
-from .schemes import SCHEMES
+from ._timing import time_compiled, time_runs
 
-
-# The comparison and its ladders live here; timing, provenance and the report of the rows in
-# `jaxrot._comparison`, re-exported: benchmarks and the fluid and thermal comparisons use them.
-__all__ = [
-    "ADAPTIVE_SOLVERS",
-    "ASYMPTOTIC_ERROR",
-    "DTYPES",
-    "LADDER_FLOOR",
-    "MAX_RUN_S",
-    "MAX_SATURATED_RUNGS",
-    "MIN_TIMED_S",
-    "REFERENCE_TOL",
-    "RESULTS_SCHEMA",
-    "TOLERANCES",
-    "budget_table",
-    "compare",
-    "fit_order",
-    "format_budget_table",
-    "format_recommendation",
-    "format_table",
-    "machine_info",
-    "measured_orders",
-    "orientation_error",
-    "plot_work_precision",
-    "recommend",
-    "relative_energy_drift",
-    "setting_label",
-    "stalled",
-    "time_compiled",
-    "time_runs",
-    "write_outputs",
-]
 
 REFERENCE_TOL = 1e-13
 DTYPES = {"float32": jnp.float32, "float64": jnp.float64}

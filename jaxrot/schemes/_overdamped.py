@@ -19,9 +19,9 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .. import quaternion as quat
-from .._fusion import stage
+from .._core._fusion import stage
 from .._state import RotState
-from ..schemes._lie_runge_kutta import CHARTS
+from ._lie_runge_kutta import CHARTS
 
 
 class AbstractOverdampedScheme(eqx.Module):

@@ -1,1 +1,0 @@
-"""The pieces of `jaxrot.comparison`: timing, provenance, and the report of its rows."""
