@@ -34,8 +34,8 @@ from jaxrot import quaternion as quat
 from jaxrot._fluid._fluid import check_fluid
 from jaxrot._integrate._overdamped import velocity_field
 from jaxrot.comparison import machine_info
+from jaxrot.schemes import OVERDAMPED_SCHEMES
 from jaxrot.schemes._exponential import FluidArgs
-from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -150,7 +150,7 @@ def frictionless_row(name, levels):
 
 
 def overdamped_row(name, levels):
-    scheme = OVERDAMPED_SCHEMES[name]
+    scheme = OVERDAMPED_SCHEMES[name].overdamped()  # the stepper of the overdamped model
     values, _ = check_fluid(fluid(), (), jnp.float64)
     velocity = velocity_field(values, None, None)
 

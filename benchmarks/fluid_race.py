@@ -52,7 +52,7 @@ from jaxrot._particles import PARTICLES
 from jaxrot.comparison import machine_info
 from jaxrot.comparison._fluid import inertial_runner, overdamped_runner, plain_fluid_torque
 from jaxrot.scenes import spheroid_shear
-from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
+from jaxrot.schemes import OVERDAMPED_SCHEMES
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -175,7 +175,7 @@ def race_one(stokes, n, repeats, time_cap, floor, max_steps, quick, log):
     for name, scheme in jaxrot.FLUID_SCHEMES.items():
         fixed(name, name, inertial_runner(scheme, scene, n), scheme.order, 8, scheme.torque_evals_per_step)
     for name in ("rkmk4", "lie_midpoint"):
-        scheme = OVERDAMPED_SCHEMES[name]
+        scheme = OVERDAMPED_SCHEMES[name].overdamped()  # the stepper of the overdamped model
         fixed(
             f"overdamped_{name}",
             f"overdamped_{name}",

@@ -26,7 +26,7 @@ import jaxrot  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
 from jaxrot.comparison._fluid import plain_fluid_torque  # noqa: E402
 from jaxrot.scenes import spheroid_shear  # noqa: E402
-from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES  # noqa: E402
+from jaxrot.schemes import OVERDAMPED_SCHEMES  # noqa: E402
 
 
 STEPS = 200

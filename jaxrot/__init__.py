@@ -48,13 +48,14 @@ from ._particles import per_body as per_body
 from ._state import RotState as RotState, Trajectory as Trajectory
 from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import (
+    BROWNIAN_SCHEMES as BROWNIAN_SCHEMES,
     FLUID_SCHEMES as FLUID_SCHEMES,
+    OVERDAMPED_SCHEMES as OVERDAMPED_SCHEMES,
     SCHEMES as SCHEMES,
     THERMAL_SCHEMES as THERMAL_SCHEMES,
     AbstractScheme as AbstractScheme,
+    schemes_for as schemes_for,
 )
-from .schemes._brownian import BROWNIAN_SCHEMES as BROWNIAN_SCHEMES
-from .schemes._overdamped import OVERDAMPED_SCHEMES as OVERDAMPED_SCHEMES
 
 
 __version__ = importlib.metadata.version("jaxrot")

@@ -22,8 +22,8 @@ from jaxrot import quaternion as quat
 from jaxrot._fluid._flow import body_flow, flow_rotation
 from jaxrot._fluid._fluid import check_fluid
 from jaxrot._integrate._overdamped import velocity_field
+from jaxrot.schemes import OVERDAMPED_SCHEMES
 from jaxrot.schemes._exponential import FluidArgs
-from jaxrot.schemes._overdamped import OVERDAMPED_SCHEMES
 from jaxrot.schemes._phi import phi_functions
 
 
@@ -244,7 +244,7 @@ def test_jeffery_period_by_the_default_overdamped_scheme():
 def test_overdamped_orders(name):
     """Log-log fit of the final orientation error (one Jeffery period of the aspect-4 spheroid)
     against RKMK4 at a 16th of the finest step."""
-    scheme = OVERDAMPED_SCHEMES[name]
+    scheme = OVERDAMPED_SCHEMES[name].overdamped()  # the stepper of the overdamped model
     fluid, _ = check_fluid(spheroid_fluid(), (), jnp.float64)
     velocity = velocity_field(fluid, None, None)
 

@@ -15,8 +15,9 @@ import jax.numpy as jnp
 from jax import lax
 
 from .. import quaternion as quat
+from .._integrate._bind import INERTIAL, scheme_for_call
 from .._state import RotState
-from ..schemes import AbstractLieRungeKutta, AbstractScheme, resolve_scheme
+from ..schemes import AbstractLieRungeKutta, AbstractScheme
 from ..schemes._base import world_torque
 from ..schemes._lie_runge_kutta import _combination, _momentum, exp_and_dexpinv
 from ._interpolation import hermite_interpolation, stage_interpolation
@@ -230,7 +231,7 @@ def solver(scheme: Any) -> SchemeSolver:
         >>> bool(jnp.allclose(jnp.linalg.norm(sol.ys.q, axis=-1), 1, atol=1e-14, rtol=0))
         True
     """
-    scheme = resolve_scheme(scheme)
+    scheme, _ = scheme_for_call(scheme, INERTIAL)  # a body in vacuum: the model a RigidBodyTerm is
     if isinstance(scheme, AbstractLieRungeKutta) and scheme.has_error_estimate and scheme.dense_output:
         return AdaptiveLieSolver(scheme)
     return SchemeSolver(scheme)

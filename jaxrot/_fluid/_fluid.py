@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._particles import PerBody, is_per_body, per_body
-from .._validation import check_values, declared_dtype, is_concrete
+from .._validation import declared_dtype, is_concrete
 from ._flow import fluid_torque, overdamped_velocity
 from ._perrin import bretherton_factor, spheroid_friction
 
@@ -173,12 +173,12 @@ def _check_values(fluid):
         raise ValueError(f"`kT` (the thermal energy) must be >= 0; got {float(np.min(kT)):.3g}.")
 
 
-def check_fluid(fluid, batch_shape, dtype, key=None):
+def check_fluid(fluid, batch_shape, dtype):
     """A rollout's ``fluid`` for its ``(N, ...)`` flattened bodies: ``(values, in_axes)``.
 
     Each field is cast to ``dtype`` and is shared (its one-body shape) or per body (the particle
-    axes ``batch_shape`` in front, or a `jaxrot.per_body`), flattened to one axis. ``kT > 0`` needs a
-    ``key``; the schemes that take the thermal torque are `jaxrot._thermal`'s.
+    axes ``batch_shape`` in front, or a `jaxrot.per_body`), flattened to one axis. Whether ``kT``
+    fits the call's scheme and key is decided before, by `jaxrot._integrate._bind`.
     """
     if not isinstance(fluid, Fluid):
         raise ValueError(f"`fluid` must be None or a jaxrot.Fluid; got {type(fluid).__name__}.")
@@ -202,16 +202,6 @@ def check_fluid(fluid, batch_shape, dtype, key=None):
                 f"`fluid.{name}` has shape {value.shape}: give it as {body_shape} for all bodies, or with "
                 f"the particle axes {batch_shape} in front for one value per body."
             )
-    kT = values["kT"]
-    if key is None and (is_concrete(kT) or axes["kT"] is None):
-        # Attached to the friction, which every step reads (an unused kT's check would be dropped
-        # under jit); a traced per-body kT is not checked: that would be a reduction over all bodies.
-        values["friction"] = check_values(
-            values["friction"],
-            jnp.any(kT > 0),
-            "`fluid.kT` > 0 (a fluid at a temperature) needs a PRNG `key`, e.g. key=jax.random.key(0): "
-            "the thermal torque is random. Pass kT=0 for a deterministic run.",
-        )
     treedef = jax.tree_util.tree_structure(jax.tree_util.tree_map(_unwrap, fluid, is_leaf=is_per_body))
     present = [name for name in _BODY_SHAPES if values[name] is not None]
     return (

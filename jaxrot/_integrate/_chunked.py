@@ -11,6 +11,7 @@ compiles at most three programs: the initial carry, full chunks, and a shorter l
 chunk.
 """
 
+import dataclasses
 import math
 import os
 import tempfile
@@ -115,7 +116,8 @@ def _resume_carry(run: Run, checkpoint) -> tuple[Any, int]:
             f"between 0 and {run.n_saves * run.save_every}."
         )
     # The structure the scheme's init builds, traced abstractly (nothing is computed).
-    expected = jax.eval_shape(lambda: run._replace(runtime_check=False).flat(0, state=run.flat_state)[1])
+    unchecked = dataclasses.replace(run, runtime_check=False)
+    expected = jax.eval_shape(lambda: unchecked.flat(0, state=run.flat_state)[1])
     wanted, treedef = jax.tree_util.tree_flatten(expected)
     leaves = jax.tree_util.tree_leaves(checkpoint.carry)
     found = [(tuple(np.shape(x)), np.dtype(x.dtype).name) for x in leaves]

@@ -21,10 +21,9 @@ from .._validation import (
     is_concrete,
 )
 from ..schemes._base import world_torque
-from ..schemes._overdamped import resolve_overdamped
 from ..schemes._rkn_splitting import uses_omega
+from ._bind import OVERDAMPED, bind_brownian, for_concrete_steps, scheme_for_call
 from ._runtime_check import IntegrationError, nonfinite_message
-from ._thermal_bind import brownian_scheme, brownian_start, without_temperature
 
 
 def overdamped_rollout(
@@ -90,20 +89,20 @@ def overdamped_rollout(
         [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     """
     q, dtype = _check_orientations(q)
-    # At a temperature (`jaxrot._thermal`): read before the checks cast the fluid and dt into the trace.
-    brownian = brownian_scheme(scheme, key, fluid, dt)
+    scheme, model = scheme_for_call(scheme, OVERDAMPED, fluid, key)  # the one check of scheme and model
+    if model == "brownian":  # read before the checks cast the fluid and dt into the trace
+        scheme = for_concrete_steps(scheme, fluid, dt)
     batch_shape = tuple(q.shape[:-1])
     dt, n_steps, save_every, t0 = check_run_times(dt, n_steps, save_every, t0, dtype)
     check_torque(torque)
-    scheme = resolve_overdamped(scheme) if brownian is None else brownian
-    fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype, key)
+    fluid, fluid_axes = check_fluid(fluid, batch_shape, dtype)
     args, args_axes = split_per_body(args, batch_shape)
     n = math.prod(batch_shape)
     start = q.reshape(n, 4)
-    if brownian is None:
-        fluid = without_temperature(fluid, scheme.name, key, langevin=False)
-    else:  # each body's start carries its noise's key and its diffusion
-        scheme, start = brownian_start(brownian, start, fluid, key)
+    if model == "brownian":  # each body's start carries its noise's key and its diffusion
+        scheme, start = bind_brownian(scheme, start, fluid, key)
+    else:
+        scheme = scheme.overdamped()
     traj = _overdamped_flat(
         scheme,
         start,

@@ -6,9 +6,10 @@ its particle axes into a `Run`; `Run.flat` runs the compiled time loop,
 one call and `jaxrot._integrate._chunked` a chunk at a time; this module imports neither.
 """
 
+import dataclasses
 import math
 import warnings
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -18,10 +19,9 @@ from .._inertia import body_inertia
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState, Trajectory
 from .._validation import check_bodies, check_run_times, check_torque, is_concrete
-from ..schemes import resolve_scheme
 from . import _blocking
+from ._bind import INERTIAL, bind_fluid, scheme_for_call
 from ._drive import check_drive, driven_step, driven_torque
-from ._fluid import bind_fluid
 from ._runtime_check import (
     IntegrationError,
     check_in_graph,
@@ -33,10 +33,14 @@ from ._runtime_check import (
 from ._sharding import particle_shards, shard_particles
 
 
-class Run(NamedTuple):
-    """A validated rollout with its particle axes flattened: the fixed arguments of `_rollout_flat`."""
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Run:
+    """A validated rollout with its particle axes flattened: the fixed arguments of `_rollout_flat`.
 
-    scheme: Any
+    Built by keyword (`prepare_run`), as diffrax builds its loop's state."""
+
+    scheme: Any  # the scheme's form for the call's model (`jaxrot._integrate._bind`)
+    model: str
     flat_state: RotState
     inertia: Any
     per_particle: bool
@@ -71,11 +75,11 @@ class Run(NamedTuple):
             self.drive_per_particle,
             n_saves,
             self.save_every,
-            self.runtime_check,
-            carry,
-            save_offset,
-            self.n_blocks,
-            keep_carry,
+            runtime_check=self.runtime_check,
+            carry=carry,
+            save_offset=save_offset,
+            n_blocks=self.n_blocks,
+            keep_carry=keep_carry,
         )
 
     def checked(self, carry):
@@ -123,7 +127,7 @@ def prepare_run(
     key=None,
 ) -> Run:
     """Check the arguments of `rollout` (before anything compiles) and flatten the particle axes."""
-    scheme = resolve_scheme(scheme)
+    scheme, model = scheme_for_call(scheme, INERTIAL, fluid, key)  # the one check of scheme and model
     state, inertia, per_particle = check_bodies(state, inertia, normalize=normalize)
     dtype = state.q.dtype
     batch_shape = tuple(state.q.shape[:-1])
@@ -133,9 +137,9 @@ def prepare_run(
 
     flat_state, inertia = flatten_particles(state, inertia, per_particle)
     args, args_axes = split_per_body(args, batch_shape)
-    if fluid is not None:  # the fluid's per-body values travel with the torque's args
+    if model != "vacuum":  # the fluid's per-body values travel with the torque's args
         scheme, args, args_axes = bind_fluid(
-            scheme, fluid, key, batch_shape, dtype, inertia, args, args_axes, drive
+            scheme, model, fluid, key, batch_shape, dtype, inertia, args, args_axes, drive
         )
     if drive_per_particle:
         drive = jax.tree_util.tree_map(lambda x: x.reshape(-1, 3), drive)
@@ -147,28 +151,29 @@ def prepare_run(
     n = math.prod(batch_shape)
     n_blocks = _blocking.n_blocks_for(n, shards=particle_shards()) if _blocking.on_cpu(flat_state.q) else 1
     # Only the torque's own args (not the fluid's) go to the torque.
-    torque_args, torque_axes = (args.args, args_axes.args) if fluid is not None else (args, args_axes)
+    torque_args, torque_axes = (args.args, args_axes.args) if model != "vacuum" else (args, args_axes)
     if n_blocks > 1 and _blocking.couples_bodies(torque, n, t0, flat_state, torque_args, torque_axes):
         n_blocks = 1
     return Run(
-        scheme,
-        flat_state,
-        inertia,
-        per_particle,
-        dt,
-        t0,
-        args,
-        args_axes,
-        torque,
-        drive,
-        drive_per_particle,
-        n_steps // save_every,
-        save_every,
-        n_steps,
-        batch_shape,
-        bool(runtime_check),
-        n_blocks,
-        bool(check_finite),
+        scheme=scheme,
+        model=model,
+        flat_state=flat_state,
+        inertia=inertia,
+        per_particle=per_particle,
+        dt=dt,
+        t0=t0,
+        args=args,
+        args_axes=args_axes,
+        torque=torque,
+        drive=drive,
+        drive_per_particle=drive_per_particle,
+        n_saves=n_steps // save_every,
+        save_every=save_every,
+        n_steps=n_steps,
+        batch_shape=batch_shape,
+        runtime_check=bool(runtime_check),
+        n_blocks=n_blocks,
+        check_finite=bool(check_finite),
     )
 
 

@@ -29,9 +29,8 @@ from .._integrate._overdamped import velocity_field
 from .._particles import PARTICLES
 from .._state import RotState, Trajectory
 from ..scenes import FLUID_SCENES
-from ..schemes import FLUID_SCHEMES
+from ..schemes import FLUID_SCHEMES, OVERDAMPED_SCHEMES
 from ..schemes._exponential import FluidArgs
-from ..schemes._overdamped import OVERDAMPED_SCHEMES
 from . import _ladder as comparison
 
 
@@ -47,7 +46,10 @@ OVERDAMPED_PREFIX = "overdamped_"
 def fixed_methods(scene) -> dict:
     """The fixed-step methods of ``scene``: ``{name: (kind, scheme)}``, ``"inertial"`` or ``"overdamped"``."""
     methods = {} if scene.inertia is None else {n: ("inertial", s) for n, s in FLUID_SCHEMES.items()}
-    methods.update({OVERDAMPED_PREFIX + n: ("overdamped", s) for n, s in OVERDAMPED_SCHEMES.items()})
+    overdamped = {
+        OVERDAMPED_PREFIX + n: ("overdamped", s.overdamped()) for n, s in OVERDAMPED_SCHEMES.items()
+    }
+    methods.update(overdamped)
     return methods
 
 
@@ -151,7 +153,7 @@ def reference(scene, state, ts):
     n = len(ts) - 1
     dt = float(ts[1] - ts[0])
     if scene.inertia is None:
-        per, run = 4096, overdamped_runner(OVERDAMPED_SCHEMES["rkmk4"], scene, None)
+        per, run = 4096, overdamped_runner(OVERDAMPED_SCHEMES["rkmk4"].overdamped(), scene, None)
     else:
         per, run = 2048, inertial_runner(FLUID_SCHEMES["exp_rk4"], scene, None)
     saved = jax.jit(run, static_argnums=3)(state, jnp.asarray(dt / per), per, n)

@@ -26,8 +26,7 @@ from .._fluid._equilibrium import langevin_function
 from .._integrate._overdamped import overdamped_rollout
 from .._integrate._rollout import rollout
 from ..scenes import THERMAL_SCENES
-from ..schemes import THERMAL_SCHEMES
-from ..schemes._brownian import BROWNIAN_SCHEMES
+from ..schemes import BROWNIAN_SCHEMES, THERMAL_SCHEMES
 from . import _ladder as comparison
 from ._report import write_csv
 

@@ -1,16 +1,42 @@
-"""The integrators, one per file, registered by name in `SCHEMES`."""
+"""Every scheme of jaxrot, one per file, registered once by name; the registry and its views.
+
+A scheme is a method, a model is what it integrates: each scheme declares ``models``, a frozenset of
+``"vacuum"``, ``"fluid"``, ``"thermal"``, ``"overdamped"`` and ``"brownian"`` (`MODELS`), and
+`schemes_for` lists those that integrate a model. `SCHEMES`, `FLUID_SCHEMES`, `THERMAL_SCHEMES`,
+`OVERDAMPED_SCHEMES` and `BROWNIAN_SCHEMES` are its read-only views, one per model. Which call runs
+which model, and whether a scheme fits it, is decided once by `jaxrot.rollout` and
+`jaxrot.overdamped_rollout` (`jaxrot._integrate._bind`).
+
+Example:
+    >>> import jaxrot
+    >>> sorted(jaxrot.schemes_for("thermal"))
+    ['baoab', 'exp_euler']
+    >>> sorted(jaxrot.SCHEMES["rkmk4"].models)
+    ['overdamped', 'vacuum']
+"""
 
 from types import MappingProxyType
 
 from ._base import AbstractScheme as AbstractScheme
+from ._brownian import (
+    AbstractBrownianScheme as AbstractBrownianScheme,
+    BrownianEuler as BrownianEuler,
+    BrownianSplitting as BrownianSplitting,
+)
 from ._exponential import (
     AbstractExponentialLieRK as AbstractExponentialLieRK,
     ExponentialTableau as ExponentialTableau,
     FluidCarry as FluidCarry,
 )
+from ._langevin import AbstractLangevinScheme as AbstractLangevinScheme
 from ._lie_runge_kutta import (
     AbstractLieRungeKutta as AbstractLieRungeKutta,
     LieRungeKuttaCarry as LieRungeKuttaCarry,
+)
+from ._overdamped import (
+    AbstractOverdampedScheme as AbstractOverdampedScheme,
+    LieEuler as LieEuler,
+    LieMidpoint as LieMidpoint,
 )
 from ._rkn_splitting import AbstractRKNSplitting as AbstractRKNSplitting
 from .baoab import BAOAB as BAOAB
@@ -29,44 +55,93 @@ from .srkn14a import SRKN14a as SRKN14a
 from .zhao import Zhao as Zhao
 
 
-SCHEMES = MappingProxyType(
-    {
-        scheme.name: scheme
-        for scheme in (
-            Zhao(),
-            Rozmanov(),
-            Euler(),
-            NoSquish(),
-            Splitting(),
-            RKMK4(),
-            RKMKDopri5(),
-            RKMKDopri8(),
-            SRKN6b(),
-            SRKN14a(),
-        )
-    }
+# The models, by the call that runs them (`jaxrot._integrate._bind` describes each to a user).
+MODELS = ("vacuum", "fluid", "thermal", "overdamped", "brownian")
+
+# The scheme classes a user may pass as an instance (the overdamped and Brownian ones advance the
+# orientation alone, so they do not share `AbstractScheme`'s inertial step).
+SCHEME_TYPES = (AbstractScheme, AbstractOverdampedScheme, AbstractBrownianScheme)
+
+
+def _register(*schemes):
+    registry = {}
+    for scheme in schemes:
+        if scheme.name in registry:
+            raise ValueError(f"scheme name {scheme.name!r} is registered twice: one name means one scheme.")
+        unknown = set(scheme.models) - set(MODELS)
+        if not scheme.models or unknown:
+            raise ValueError(
+                f"scheme {scheme.name!r} declares models {sorted(scheme.models)}; known {MODELS}"
+            )
+        registry[scheme.name] = scheme
+    return MappingProxyType(registry)
+
+
+# Every scheme, once. The order is each view's order (results files and tables list them so).
+REGISTRY = _register(
+    Zhao(),
+    Rozmanov(),
+    Euler(),
+    NoSquish(),
+    Splitting(),
+    LieEuler(),
+    LieMidpoint(),
+    RKMK4(),
+    RKMKDopri5(),
+    RKMKDopri8(),
+    SRKN6b(),
+    SRKN14a(),
+    ExpMidpoint(),
+    ExpRK4(),
+    BAOAB(),
+    ExpEuler(),
+    BrownianEuler(),
+    BrownianSplitting(),
 )
 
-# The exponential schemes, which integrate a fluid's friction with no step limit (`jaxrot.Fluid`):
-# named by `jaxrot.rollout` like the others, kept out of `SCHEMES`, whose every member the
-# results files under docs/ cover.
-FLUID_SCHEMES = MappingProxyType({scheme.name: scheme for scheme in (ExpMidpoint(), ExpRK4())})
 
-# The schemes of `jaxrot.rollout` that integrate the thermal torque (underdamped Langevin).
-THERMAL_SCHEMES = MappingProxyType({s.name: s for s in (BAOAB(), ExpEuler())})
+def schemes_for(model: str) -> dict:
+    """The registered schemes that integrate ``model``, by name, in registry order.
+
+    Args:
+        model: one of ``"vacuum"`` (`jaxrot.rollout` without ``fluid``), ``"fluid"`` (with a
+            `jaxrot.Fluid` at ``kT = 0``), ``"thermal"`` (``kT > 0`` and a ``key``),
+            ``"overdamped"`` (`jaxrot.overdamped_rollout` at ``kT = 0``) or ``"brownian"``
+            (`jaxrot.overdamped_rollout` at ``kT > 0`` with a ``key``).
+
+    Returns:
+        ``dict[str, scheme]``: a new dict; each scheme's ``models`` holds ``model``.
+
+    Raises:
+        ValueError: an unknown model.
+
+    Example:
+        >>> import jaxrot
+        >>> list(jaxrot.schemes_for("overdamped"))
+        ['lie_euler', 'lie_midpoint', 'rkmk4']
+    """
+    if model not in MODELS:
+        raise ValueError(f"`model` must be one of {', '.join(map(repr, MODELS))}; got {model!r}.")
+    return {name: scheme for name, scheme in REGISTRY.items() if model in scheme.models}
 
 
-def resolve_scheme(scheme) -> AbstractScheme:
-    """A scheme object from a name in `SCHEMES`, `FLUID_SCHEMES` or `THERMAL_SCHEMES`, or an instance."""
-    if isinstance(scheme, AbstractScheme):
+# The views, one per model (read-only, as they always were).
+SCHEMES = MappingProxyType(schemes_for("vacuum"))
+FLUID_SCHEMES = MappingProxyType(schemes_for("fluid"))
+THERMAL_SCHEMES = MappingProxyType(schemes_for("thermal"))
+OVERDAMPED_SCHEMES = MappingProxyType(schemes_for("overdamped"))
+BROWNIAN_SCHEMES = MappingProxyType(schemes_for("brownian"))
+
+
+def resolve_scheme(scheme):
+    """A scheme object from a registered name or an instance (any model); ValueError otherwise.
+
+    Whether it fits a call is the binder's to decide (`jaxrot._integrate._bind`)."""
+    if isinstance(scheme, SCHEME_TYPES):
         return scheme
-    if isinstance(scheme, str) and scheme in SCHEMES:
-        return SCHEMES[scheme]
-    if isinstance(scheme, str) and scheme in FLUID_SCHEMES:
-        return FLUID_SCHEMES[scheme]
-    if isinstance(scheme, str) and scheme in THERMAL_SCHEMES:
-        return THERMAL_SCHEMES[scheme]
+    if isinstance(scheme, str) and scheme in REGISTRY:
+        return REGISTRY[scheme]
     raise ValueError(
-        f"`scheme` must be one of {sorted(SCHEMES) + sorted(FLUID_SCHEMES) + sorted(THERMAL_SCHEMES)} or a "
-        f"jaxrot.schemes.AbstractScheme instance; got {scheme!r}."
+        f"`scheme` must be one of {', '.join(map(repr, REGISTRY))} or a jaxrot.schemes.AbstractScheme "
+        f"instance; got {scheme!r}."
     )

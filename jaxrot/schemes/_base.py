@@ -46,8 +46,14 @@ class AbstractScheme(eqx.Module):
     - ``args``: any pytree, passed to ``torque`` unchanged.
 
     Class attributes (required of every concrete scheme, checked by equinox):
-        name: the key in `jaxrot.SCHEMES`.
-        order: global order of accuracy in ``dt``, as measured by the test suite.
+        name: the scheme's one name, registered once (`jaxrot.schemes_for`).
+        order: global order of accuracy in ``dt``, as measured by the test suite (the weak
+            order for a scheme of the thermal model).
+        models: the models the scheme integrates, a frozenset of ``"vacuum"`` (`jaxrot.rollout`
+            without ``fluid``), ``"fluid"`` (with a `jaxrot.Fluid` at ``kT = 0``), ``"thermal"``
+            (at ``kT > 0``, with a key), ``"overdamped"`` and ``"brownian"``
+            (`jaxrot.overdamped_rollout` at ``kT = 0`` and ``kT > 0``): what `jaxrot.rollout`'s
+            binder checks once, as diffrax checks a solver's ``term_structure``.
         torque_evals_per_step: calls of the torque callable per step (0 when
             ``torque=None``).
         torque_evals_at_init: extra calls made once by `init` (schemes that
@@ -59,6 +65,7 @@ class AbstractScheme(eqx.Module):
 
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
+    models: eqx.AbstractClassVar[frozenset[str]]
     torque_evals_per_step: eqx.AbstractClassVar[int]
     torque_evals_at_init: ClassVar[int] = 0
 

@@ -15,7 +15,6 @@ its noise and its diffusion ``D`` ``(3,)``, set by `brownian_start`.
 
 import abc
 import dataclasses
-from types import MappingProxyType
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
@@ -62,6 +61,7 @@ class AbstractBrownianScheme(eqx.Module):
     key_impl: str | None = eqx.field(default=None, static=True)
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
+    models: eqx.AbstractClassVar[frozenset[str]]
     normals_per_step: eqx.AbstractClassVar[int]
     velocity_evals_per_step: eqx.AbstractClassVar[int]
 
@@ -108,6 +108,7 @@ class BrownianEuler(AbstractBrownianScheme):
 
     name: ClassVar[str] = "brownian_euler"
     order: ClassVar[int] = 1
+    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
     normals_per_step: ClassVar[int] = 3
     velocity_evals_per_step: ClassVar[int] = 1
 
@@ -151,6 +152,7 @@ class BrownianSplitting(AbstractBrownianScheme):
 
     name: ClassVar[str] = "brownian_splitting"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
     normals_per_step: ClassVar[int] = 8
     velocity_evals_per_step: ClassVar[int] = 4
     # Static: whether some body's ``D_min Δt`` may exceed `SMALL_STEP` (the heat kernel's spectral
@@ -179,7 +181,3 @@ def for_steps(scheme, diffusion, dt):
         return scheme
     largest = float(np.max(np.min(np.asarray(diffusion), axis=-1), initial=0.0) * np.max(np.asarray(dt)))
     return dataclasses.replace(scheme, large_steps=largest > SMALL_STEP)
-
-
-BROWNIAN_SCHEMES = MappingProxyType({s.name: s for s in (BrownianEuler(), BrownianSplitting())})
-DEFAULT_BROWNIAN = "brownian_splitting"

@@ -59,23 +59,18 @@ class AbstractLangevinScheme(AbstractScheme):
     per body and step). ``order`` is the weak order (bias of ensemble averages), measured by the
     tests; at ``kT = 0`` it is also the scheme's deterministic order. The static field ``key_impl``
     (the PRNG implementation of the run's key, None without noise) is set by the rollout, which gives
-    ``args`` as a `ThermalArgs`; a scheme used without ``fluid=`` refuses.
+    ``args`` as a `ThermalArgs` (`jaxrot._integrate._bind`, which refuses any other call).
     """
 
     key_impl: str | None = eqx.field(default=None, static=True)
-    bound: bool = eqx.field(default=False, static=True)
     normals_per_step: eqx.AbstractClassVar[int]
 
     def bind(self, key_impl: str | None) -> "AbstractLangevinScheme":
         """This scheme for a rollout in a fluid whose noise comes from keys of ``key_impl``."""
-        return dataclasses.replace(self, key_impl=key_impl, bound=True)
+        return dataclasses.replace(self, key_impl=key_impl)
 
     def _unpack(self, args):
-        if not self.bound:
-            raise ValueError(
-                f"scheme {self.name!r} integrates a body in a fluid at a temperature: pass "
-                "fluid=jaxrot.Fluid(friction, kT=...) (and a key when kT > 0) to jaxrot.rollout."
-            )
+        # A `ThermalArgs`: `jaxrot.rollout`'s binder gives no other to a scheme of the thermal model.
         return args
 
     def state(self, carry):

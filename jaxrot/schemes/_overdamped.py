@@ -12,7 +12,6 @@ first stage and the angular velocity the rollout saves (first same as last).
 """
 
 from collections.abc import Callable
-from types import MappingProxyType
 from typing import ClassVar
 
 import equinox as eqx
@@ -42,6 +41,7 @@ class AbstractOverdampedScheme(eqx.Module):
     chart: str = eqx.field(default="exp", static=True)
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
+    models: eqx.AbstractClassVar[frozenset[str]]
     nodes: eqx.AbstractClassVar[tuple[float, ...]]
     rows: eqx.AbstractClassVar[tuple[tuple[float, ...], ...]]
     weights: eqx.AbstractClassVar[tuple[float, ...]]
@@ -49,6 +49,10 @@ class AbstractOverdampedScheme(eqx.Module):
     def __check_init__(self):
         if self.chart not in CHARTS:
             raise ValueError(f"`chart` must be one of {sorted(CHARTS)}; got {self.chart!r}.")
+
+    def overdamped(self) -> "AbstractOverdampedScheme":
+        """The stepper `jaxrot.overdamped_rollout` drives: the scheme itself."""
+        return self
 
     @property
     def velocity_evals_per_step(self) -> int:
@@ -86,6 +90,7 @@ class LieEuler(AbstractOverdampedScheme):
 
     name: ClassVar[str] = "lie_euler"
     order: ClassVar[int] = 1
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped"})
     nodes: ClassVar[tuple] = ()
     rows: ClassVar[tuple] = ()
     weights: ClassVar[tuple] = (1.0,)
@@ -96,6 +101,7 @@ class LieMidpoint(AbstractOverdampedScheme):
 
     name: ClassVar[str] = "lie_midpoint"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped"})
     nodes: ClassVar[tuple] = (0.5,)
     rows: ClassVar[tuple] = ((0.5,),)
     weights: ClassVar[tuple] = (0.0, 1.0)
@@ -104,28 +110,12 @@ class LieMidpoint(AbstractOverdampedScheme):
 class OverdampedRKMK4(AbstractOverdampedScheme):
     """RKMK4: the classical fourth-order tableau in Munthe-Kaas coordinates; four evaluations per step.
 
-    The default of `jaxrot.overdamped_rollout`."""
+    The overdamped form of `jaxrot.schemes.RKMK4` (``RKMK4().overdamped()``), which is registered
+    once as ``"rkmk4"`` for both models; the default of `jaxrot.overdamped_rollout` without a key."""
 
     name: ClassVar[str] = "rkmk4"
     order: ClassVar[int] = 4
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped"})
     nodes: ClassVar[tuple] = (0.5, 0.5, 1.0)
     rows: ClassVar[tuple] = ((0.5,), (0.0, 0.5), (0.0, 0.0, 1.0))
     weights: ClassVar[tuple] = (1 / 6, 1 / 3, 1 / 3, 1 / 6)
-
-
-OVERDAMPED_SCHEMES = MappingProxyType({s.name: s for s in (LieEuler(), LieMidpoint(), OverdampedRKMK4())})
-DEFAULT_OVERDAMPED = "rkmk4"
-
-
-def resolve_overdamped(scheme) -> AbstractOverdampedScheme:
-    """A scheme from a name in `OVERDAMPED_SCHEMES` (None: the default), or an instance."""
-    if scheme is None:
-        scheme = DEFAULT_OVERDAMPED
-    if isinstance(scheme, AbstractOverdampedScheme):
-        return scheme
-    if isinstance(scheme, str) and scheme in OVERDAMPED_SCHEMES:
-        return OVERDAMPED_SCHEMES[scheme]
-    raise ValueError(
-        f"`scheme` must be None (the default, {DEFAULT_OVERDAMPED!r}), one of {sorted(OVERDAMPED_SCHEMES)} "
-        f"or a jaxrot overdamped scheme instance; got {scheme!r}."
-    )

@@ -42,6 +42,7 @@ class Euler(AbstractScheme):
 
     name: ClassVar[str] = "euler"
     order: ClassVar[int] = 1
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     torque_evals_per_step: ClassVar[int] = 1
 
     def step(self, carry, t, dt, inertia, torque, args):

@@ -35,4 +35,5 @@ class ExpMidpoint(AbstractExponentialLieRK):
 
     name: ClassVar[str] = "exp_midpoint"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"fluid"})
     tableau: ClassVar[ExponentialTableau] = _MIDPOINT

@@ -53,4 +53,5 @@ class ExpRK4(AbstractExponentialLieRK):
 
     name: ClassVar[str] = "exp_rk4"
     order: ClassVar[int] = 4
+    models: ClassVar[frozenset[str]] = frozenset({"fluid"})
     tableau: ClassVar[ExponentialTableau] = _HOCHBRUCK_OSTERMANN

@@ -115,6 +115,7 @@ class NoSquish(AbstractScheme):
 
     name: ClassVar[str] = "no_squish"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
 

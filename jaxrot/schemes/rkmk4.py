@@ -7,6 +7,7 @@ import equinox as eqx
 import numpy as np
 
 from ._lie_runge_kutta import AbstractLieRungeKutta
+from ._overdamped import OverdampedRKMK4
 
 
 # diffrax ships no classical RK4; its ButcherTableau validates the coefficients (Σa = c, Σb = 1).
@@ -31,6 +32,9 @@ class RKMK4(AbstractLieRungeKutta):
     kept to the method's order rather than exactly; ``RKMK4(momentum_frame="world")`` keeps it
     exactly (the scheme before).
 
+    The same name integrates the overdamped model (`jaxrot.overdamped_rollout`, its default without
+    a key): the tableau then advances the orientation alone (`overdamped`).
+
     Reference: H. Munthe-Kaas, BIT 38, 92–111 (1998); Kutta (1901).
 
     Example:
@@ -43,5 +47,11 @@ class RKMK4(AbstractLieRungeKutta):
 
     name: ClassVar[str] = "rkmk4"
     order: ClassVar[int] = 4
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum", "overdamped"})
     tableau: ClassVar[diffrax.ButcherTableau] = _RK4
     momentum_frame: str = eqx.field(default="body", static=True)
+
+    def overdamped(self) -> OverdampedRKMK4:
+        """The same tableau on the orientation alone, for `jaxrot.overdamped_rollout` (the overdamped
+        model, no inertia), in this scheme's ``chart``."""
+        return OverdampedRKMK4(chart=self.chart)

@@ -27,6 +27,7 @@ class RKMKDopri5(AbstractLieRungeKutta):
 
     name: ClassVar[str] = "rkmk_dopri5"
     order: ClassVar[int] = 5
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri5.tableau
     has_error_estimate: ClassVar[bool] = True
     dense_output: ClassVar[Any] = diffrax.Dopri5.interpolation_cls

@@ -27,6 +27,7 @@ class RKMKDopri8(AbstractLieRungeKutta):
 
     name: ClassVar[str] = "rkmk_dopri8"
     order: ClassVar[int] = 8
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri8.tableau
     has_error_estimate: ClassVar[bool] = True
     dense_output: ClassVar[Any] = diffrax.Dopri8.interpolation_cls

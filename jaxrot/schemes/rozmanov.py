@@ -87,6 +87,7 @@ class Rozmanov(AbstractScheme):
 
     name: ClassVar[str] = "rozmanov"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
     max_iter: int = 8

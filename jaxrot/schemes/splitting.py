@@ -180,6 +180,7 @@ class Splitting(AbstractRotorSplitting):
 
     name: ClassVar[str] = "splitting"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
 

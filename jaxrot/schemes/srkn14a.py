@@ -47,6 +47,7 @@ class SRKN14a(AbstractRKNSplitting):
 
     name: ClassVar[str] = "srkn14a"
     order: ClassVar[int] = 6
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     rotor_weights: ClassVar[tuple[float, ...]] = palindrome(
         _ROTORS, (1 - 2 * sum(_ROTORS),)
     )  # 0.2073050690568954

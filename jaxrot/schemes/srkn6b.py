@@ -31,6 +31,7 @@ class SRKN6b(AbstractRKNSplitting):
 
     name: ClassVar[str] = "srkn6b"
     order: ClassVar[int] = 4
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     kick_weights: ClassVar[tuple[float, ...]] = palindrome(
         (0.082984406417405200, 0.39630980149836800, -0.039056304922348600),
         (1 - 2 * (0.082984406417405200 + 0.39630980149836800 - 0.039056304922348600),),  # 0.1195241940131508

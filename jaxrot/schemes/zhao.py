@@ -47,6 +47,7 @@ class Zhao(AbstractScheme):
 
     name: ClassVar[str] = "zhao"
     order: ClassVar[int] = 2
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})
     torque_evals_per_step: ClassVar[int] = 2
 
     def step(self, carry, t, dt, inertia, torque, args):
