@@ -43,7 +43,10 @@ class Fluid(eqx.Module):
         bretherton: Jeffery's shape factor ``B`` in ``(−1, 1)``: ``(λ² − 1)/(λ² + 1)`` for a
             spheroid of aspect ratio λ (`Fluid.spheroid`), 0 for a sphere; scalar or per body.
         kT: the thermal energy (≥ 0); ``kT > 0`` adds the thermal torque that balances the
-            friction and needs a PRNG ``key`` in the rollout. Scalar or per body.
+            friction and needs a PRNG ``key`` in the rollout. Scalar or per body. Whether it is 0
+            is recorded when the fluid is built (the static field ``temperature``: ``"zero"``,
+            ``"positive"``, or ``"unknown"`` for a traced value), so a fluid built outside ``jit``
+            and passed in keeps its model; build a new `Fluid` to change ``kT``.
 
     The torque on a body at ``(q, ω)`` (world frame, `torque`) is
     ``τ = R (ζ ⊙ Rᵀ (Ω + B p × (E p) − ω))`` with ``Ω = ½ ∇ × u``, ``E = ½ (A + Aᵀ)``, ``R`` the
@@ -66,6 +69,10 @@ class Fluid(eqx.Module):
     velocity_gradient: jax.Array | PerBody | None
     bretherton: jax.Array | PerBody
     kT: jax.Array | PerBody
+    # Whether kT is 0, read where it was given (a Python number, or a concrete array): "zero",
+    # "positive" or "unknown" (built from a traced value). Static, so that a Fluid passed through
+    # `jax.jit` still tells the rollout at trace time which model it asks for (`jaxrot._integrate._bind`).
+    temperature: str = eqx.field(static=True)
 
     def __init__(self, friction, *, velocity_gradient=None, bretherton=0.0, kT=0.0):
         def array(x):
@@ -74,6 +81,7 @@ class Fluid(eqx.Module):
         self.friction = array(friction)
         self.velocity_gradient = None if velocity_gradient is None else array(velocity_gradient)
         self.bretherton = array(bretherton)
+        self.temperature = _temperature(kT)
         self.kT = array(kT)
         _check_values(self)
 
@@ -127,6 +135,13 @@ class Fluid(eqx.Module):
         """The overdamped world angular velocity ``(..., 3)`` of bodies at ``q``: the flow's rotation
         ``Ω + B p × (E p)`` plus ``R (ζ⁻¹ ⊙ Rᵀ τ)`` for an applied world ``torque`` (or None)."""
         return overdamped_velocity(q, jax.tree_util.tree_map(_unwrap, self, is_leaf=is_per_body), torque)
+
+
+def _temperature(kT) -> str:
+    value = _unwrap(kT)
+    if not is_concrete(value):
+        return "unknown"
+    return "positive" if np.any(np.asarray(value, dtype=np.float64) > 0) else "zero"
 
 
 def _check_values(fluid):

@@ -8,9 +8,10 @@ A scheme is a method, a model what it integrates (`jaxrot.schemes`: every scheme
 - `jaxrot.overdamped_rollout`: ``"overdamped"`` at ``kT = 0``, ``"brownian"`` at ``kT > 0`` with a
   ``key``.
 
-At a concrete ``kT = 0`` a scheme of the thermal (Brownian) model also runs, without noise. A traced
-``kT`` (under ``jit``) counts as a temperature when a ``key`` is given, and without one it is refused
-at trace time: whether it is 0 is not known before the program runs. `scheme_for_call` checks the
+At ``kT = 0`` a scheme of the thermal (Brownian) model also runs, without noise. Whether ``kT`` is 0
+is read from its value, or under ``jit`` from what `jaxrot.Fluid` recorded where it was built; a
+``kT`` built from a traced value counts as a temperature when a ``key`` is given, and without one it
+is refused at trace time: whether it is 0 is not known before the program runs. `scheme_for_call` checks the
 scheme once, before anything compiles, and raises one `ValueError` that names the schemes that run
 that very call (and the other entry point where the scheme's model needs it); `bind_fluid`,
 `bind_thermal` and `bind_brownian` then give the model's form of the scheme and its arguments.
@@ -75,11 +76,12 @@ def candidates(model: str) -> str:
 
 
 def temperature(fluid) -> str:
-    """``"zero"``, ``"positive"`` (some body's concrete ``kT > 0``) or ``"traced"``."""
+    """``"zero"``, ``"positive"`` (some body's ``kT > 0``) or ``"traced"``: from the concrete value, else
+    from what the fluid recorded where it was built (`jaxrot.Fluid`'s static ``temperature``)."""
     kT = unwrap_per_body(fluid.kT)
-    if not is_concrete(kT):
-        return "traced"
-    return "positive" if np.any(np.asarray(kT) > 0) else "zero"
+    if is_concrete(kT):
+        return "positive" if np.any(np.asarray(kT) > 0) else "zero"
+    return {"unknown": "traced"}.get(fluid.temperature, fluid.temperature)
 
 
 def call_models(entry: str, fluid, key) -> tuple[str, ...] | None:
