@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrot
-from jaxrot import _fit, quaternion as quat
+from jaxrot import quaternion as quat
+from jaxrot._fit._fit_inertia import _model, _residuals
 
 
 MOMENTS = jnp.array([2.0, 3.0, 4.0])
@@ -45,12 +46,12 @@ def gradient_memory(n_steps, checkpoint, n_obs=101):
     obs = jaxrot.rollout(
         "zhao", STATE, TENSOR, 0.001, n_steps, torque=gravity, args=ARGS, save_every=substeps
     )
-    problem, _ = _fit._build_problem(
+    problem, _ = _model.build_model(
         obs, torque=gravity, args=ARGS, segments=1, unit_trace=False, substeps=substeps, checkpoint=checkpoint
     )
 
     def loss(inertia, q0, omega0):
-        return _fit._single_shooting_loss(problem, inertia, q0, omega0)
+        return _residuals.single_shooting_loss(problem, inertia, q0, omega0)
 
     start = time.perf_counter()
     compiled = jax.jit(jax.grad(loss, argnums=(0, 1, 2))).lower(TENSOR, STATE.q, STATE.omega).compile()

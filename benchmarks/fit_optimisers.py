@@ -9,13 +9,13 @@ a heavy top; and noise-free orientations stepped by Zhao itself (400 steps, ever
 saved), torque-free and as a heavy top. Every optimiser starts from `fit_inertia`'s own
 start (the linear angular-momentum estimate) and works on the same objective:
 
-- ``GN (jaxrot)``: ``jaxrot._fit._optimise``, `fit_inertia`'s optimiser with its
+- ``GN (jaxrot)``: ``jaxrot._fit._fit_inertia._solve.solve``, `fit_inertia`'s optimiser with its
   defaults (Gauss–Newton with a backtracking Armijo search, one compiled loop,
   forward-mode Jacobian, ``ftol=1e-7`` or the round-off floor, the loss history kept);
 - ``LM`` and ``GN (optimistix)``: ``optimistix.least_squares`` with
   ``LevenbergMarquardt`` / ``GaussNewton`` (``rtol=atol=1e-10``, their own Cauchy
   termination, ``jax.linearize`` Jacobians) on the residual vector whose sum of squares
-  is `fit_inertia`'s objective (``jaxrot._fit._residuals``).
+  is `fit_inertia`'s objective (``jaxrot._fit._fit_inertia._residuals.residuals``).
 
 Each optimiser runs once to compile; then the three run interleaved ``--repeats`` times
 and the median wall time is printed, with the ratio to ``GN (jaxrot)``'s median of the
@@ -43,8 +43,9 @@ import optimistix as optx
 
 import jaxrot
 from jaxrot import _fit, quaternion as quat
-from jaxrot._fit._initial import _start_params
-from jaxrot._fit._optimiser import _optimise
+from jaxrot._fit._fit_inertia import _model, _residuals, _start
+from jaxrot._fit._fit_inertia._solve import round_off_floor, solve
+from jaxrot._fit._parameterisation import _flat, _unflat
 
 
 MOMENTS = jnp.array([2.0, 3.0, 4.0])
@@ -86,19 +87,17 @@ def set_up(obs, torque_on, options):
     """`fit_inertia`'s problem, start parameters, free coordinates and round-off floor."""
     torque = dict(torque=gravity, args=ARGS) if torque_on else dict(torque=None, args=None)
     unit_trace = not torque_on
-    problem, observations = _fit._build_problem(obs, segments=1, unit_trace=unit_trace, **torque, **options)
-    params = _start_params(
+    problem, observations = _model.build_model(obs, segments=1, unit_trace=unit_trace, **torque, **options)
+    params = _start.starting_point(
         observations, **torque, unit_trace=unit_trace, segments=1, inertia0=None, omega0=None
     )
     free = np.arange(1 if unit_trace else 0, 12)
-    floor = _fit._round_off_floor(
-        problem, float(np.max(np.linalg.norm(observations.omega_estimate, axis=-1)))
-    )
+    floor = round_off_floor(problem, float(np.max(np.linalg.norm(observations.omega_estimate, axis=-1))))
     return problem, params, free, floor
 
 
 def jaxrot_gn(problem, params, free, floor):
-    out = _optimise(
+    out = solve(
         params, problem, free, adam_steps=0, adam_learning_rate=1e-2, max_iter=500, ftol=1e-7, floor=floor
     )
     return out.params, out.n_iterations, out.converged
@@ -107,15 +106,15 @@ def jaxrot_gn(problem, params, free, floor):
 @eqx.filter_jit
 def _solve(solver, x0, free, like, problem):
     def residuals(z, _):
-        return _fit._residuals(_fit._unflat(x0.at[free].set(z), like, x0.dtype), problem)[0]
+        return _residuals.residuals(_unflat(x0.at[free].set(z), like, x0.dtype), problem)[0]
 
     sol = optx.least_squares(residuals, solver, x0[free], max_steps=200, throw=False)
     return x0.at[free].set(sol.value), sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
 def optimistix(solver, problem, params, free):
-    x, steps, ok = _solve(solver, jnp.asarray(_fit._flat(params)), jnp.asarray(free), params, problem)
-    return _fit._unflat(x, params, jnp.float64), int(steps), bool(ok)
+    x, steps, ok = _solve(solver, jnp.asarray(_flat(params)), jnp.asarray(free), params, problem)
+    return _unflat(x, params, jnp.float64), int(steps), bool(ok)
 
 
 OPTIMISERS = {
@@ -132,7 +131,7 @@ OPTIMISERS = {
 def run_case(name, repeats):
     make, torque_on, options = CASES[name]
     problem, params, free, floor = set_up(make(), torque_on, options)
-    objective = jax.jit(_fit._objective)
+    objective = jax.jit(_residuals.objective)
     results, first, times = {}, {}, {label: [] for label in OPTIMISERS}
     for label, optimise in OPTIMISERS.items():
         start = time.perf_counter()
@@ -143,7 +142,7 @@ def run_case(name, repeats):
             start = time.perf_counter()
             out = optimise(problem, params, free, floor)
             times[label].append(time.perf_counter() - start)
-            assert np.array_equal(_fit._flat(out[0]), _fit._flat(results[label][0]))  # deterministic
+            assert np.array_equal(_flat(out[0]), _flat(results[label][0]))  # deterministic
     base = statistics.median(times["GN (jaxrot)"])
     rows = []
     for label in OPTIMISERS:

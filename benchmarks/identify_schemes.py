@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from _telemetry import SATELLITE_DIPOLE, SATELLITE_INERTIA, dipole_torque, satellite_experiments  # noqa: E402
 
 import jaxrot  # noqa: E402
-import jaxrot._fit._identify_start as identify_start  # noqa: E402
+import jaxrot._fit._identify._start as identify_start  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
 
 

@@ -10,6 +10,8 @@ from helpers import central_difference_grad
 
 import jaxrot
 from jaxrot import _fit, quaternion as quat
+from jaxrot._fit import _parameterisation
+from jaxrot._fit._fit_inertia import _model, _residuals, _solve
 
 
 # An asymmetric body well inside the physical set (I1 + I2 > I3), in a lab body frame where its
@@ -72,7 +74,7 @@ def test_parameterisation_is_physical_and_onto():
 def gradient_problem(checkpoint: bool):
     """1000 Zhao steps of the heavy top: 101 observations, 10 steps per interval."""
     obs, _ = observations(True, n=101, t_end=5.0)
-    problem, _ = _fit._build_problem(
+    problem, _ = _model.build_model(
         obs, torque=gravity, args=ARGS, segments=1, unit_trace=False, substeps=10, checkpoint=checkpoint
     )
     assert problem.substeps * (obs.t.shape[0] - 1) == 1000
@@ -82,7 +84,7 @@ def gradient_problem(checkpoint: bool):
 @functools.cache
 def loss_and_grad(checkpoint: bool):
     """Compiled objective of `gradient_problem` and its gradient w.r.t. (inertia, q0, omega0)."""
-    loss = functools.partial(_fit._single_shooting_loss, gradient_problem(checkpoint))
+    loss = functools.partial(_residuals.single_shooting_loss, gradient_problem(checkpoint))
     return jax.jit(loss), jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2)))
 
 
@@ -114,16 +116,16 @@ def test_checkpointed_gradient_equals_plain_gradient():
 def test_gradients_of_the_fit_parameters_match_central_differences():
     """The full objective (parameterised tensor, rotation-vector q0 offset, ω0) on a short problem."""
     obs, _ = observations(True, n=101, t_end=5.0)
-    problem, extra = _fit._build_problem(
+    problem, extra = _model.build_model(
         obs, torque=gravity, args=ARGS, segments=1, unit_trace=False, substeps=10
     )
-    params = _fit._Params(
+    params = _parameterisation._Params(
         jnp.asarray(_fit.cholesky_from_inertia(TENSOR * 1.02)),
         jnp.full((1, 3), 0.01),
         jnp.asarray(extra.omega_estimate[:1]),
     )
-    value_and_grad = _fit._value_and_grad(params, problem)
-    objective = jax.jit(_fit._objective)
+    value_and_grad = _residuals.value_and_grad(params, problem)
+    objective = jax.jit(_residuals.objective)
     for field in range(3):
 
         def f(x, field=field):
@@ -174,8 +176,8 @@ def test_torque_free_determines_only_the_ratios():
     np.testing.assert_allclose(ratios, true_moments / true_moments[0], rtol=0.01)
     assert np.all(axis_errors_deg(fit.axes, true_axes) < 1.0)
     # Any scale of the true tensor fits equally well: the objective cannot see it.
-    problem, _ = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=False)
-    loss = jax.jit(functools.partial(_fit._single_shooting_loss, problem))
+    problem, _ = _model.build_model(obs, torque=None, args=None, segments=1, unit_trace=False)
+    loss = jax.jit(functools.partial(_residuals.single_shooting_loss, problem))
     np.testing.assert_allclose(
         loss(TENSOR, STATE.q, STATE.omega), loss(7.0 * TENSOR, STATE.q, STATE.omega), rtol=1e-9
     )
@@ -223,8 +225,8 @@ def perfect_observations(dtype):
 
 def round_off_floor(obs, **options):
     """`fit_inertia`'s round-off floor of the objective for torque-free ``obs``."""
-    problem, extra = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
-    return _fit._round_off_floor(problem, float(np.max(np.linalg.norm(extra.omega_estimate, axis=-1))))
+    problem, extra = _model.build_model(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
+    return _solve.round_off_floor(problem, float(np.max(np.linalg.norm(extra.omega_estimate, axis=-1))))
 
 
 def ratio_sensitivity(obs, **options):
@@ -234,14 +236,16 @@ def ratio_sensitivity(obs, **options):
     so near the optimum ``f = f* + ½ |Δz|²`` with ``Δx = M Δz``, and the ratios move by ``rows @ Δz``.
     """
     obs = jaxrot.Trajectory(*(None if x is None else jnp.asarray(x, jnp.float64) for x in obs))
-    problem, _ = _fit._build_problem(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
+    problem, _ = _model.build_model(obs, torque=None, args=None, segments=1, unit_trace=True, **options)
     chol = _fit.cholesky_from_inertia(TENSOR)
-    params = _fit._Params(jnp.asarray(chol / chol[0]), jnp.zeros((1, 3)), STATE.omega[None])
-    x = _fit._flat(params)
+    params = _parameterisation._Params(jnp.asarray(chol / chol[0]), jnp.zeros((1, 3)), STATE.omega[None])
+    x = _parameterisation._flat(params)
     free = np.arange(1, x.size)  # chol[0] is fixed in a torque-free fit
 
     def residuals(z):
-        return _fit._residuals(_fit._unflat(jnp.asarray(x).at[free].set(z), params, jnp.float64), problem)[0]
+        return _residuals.residuals(
+            _parameterisation._unflat(jnp.asarray(x).at[free].set(z), params, jnp.float64), problem
+        )[0]
 
     jac = np.asarray(jax.jacfwd(residuals)(jnp.asarray(x[free])))
     values, vectors = np.linalg.eigh(2 * jac.T @ jac)

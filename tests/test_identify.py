@@ -276,10 +276,10 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian():
     agree to reassociation only: ~10³ operations per entry (20 steps of a few dozen) at float64's
     1.1e-16, inside 1e-11 of the largest entry. The model is built by identify's own stages
     (check → start → problem), without compiling the fit."""
-    from jaxrot._fit._identify_check import check_arguments
-    from jaxrot._fit._identify_model import n_head, n_own, residuals, residuals_and_jacobian, states
-    from jaxrot._fit._identify_problem import build_problem
-    from jaxrot._fit._identify_start import starting_point
+    from jaxrot._fit._identify._check import check_arguments
+    from jaxrot._fit._identify._model import n_head, n_own, residuals, residuals_and_jacobian, states
+    from jaxrot._fit._identify._problem import build_problem
+    from jaxrot._fit._identify._start import starting_point
 
     def torque(t, q, omega, args):
         return args["gain"] * jnp.array([0.0, 0.01, 0.02]) - 0.05 * omega
@@ -328,7 +328,7 @@ def test_control_in_each_step_is_the_sampled_control(hold):
     (``"linear"``), or the sample at or before ``t``, zero before the first (``"previous"``). Steps
     land on every control time inside the record, so no step straddles a jump or a kink. Each value
     is one interpolation plus one product: within 8 eps of the largest sample."""
-    from jaxrot._fit._controls import step_grid
+    from jaxrot._fit._identify._controls import step_grid
 
     rng = np.random.default_rng(5)
     t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 10.0, 30)), [10.0]])

@@ -95,7 +95,7 @@ def test_residual_statistics_tell_white_noise_from_a_model_error():
     """Whitened white noise: RMS 1 ± 1/√(2·3n) and lag-one autocorrelation 0 ± 1/√(3n) (n = 2000:
     ±0.009 and ±0.013, checked at 5 sd); a slow drift (a random walk, what an unmodelled bias leaves)
     correlates consecutive residuals near 1."""
-    from jaxrot._fit._report import residual_statistics
+    from jaxrot._fit._identify._report import residual_statistics
 
     rng = np.random.default_rng(0)
     white = rng.normal(size=(2000, 3))
@@ -117,10 +117,10 @@ def test_held_body_frame_control_keeps_the_schemes_order(scheme, order, floor):
     model's states at the true parameters against the reference (steps on the switches too), at 2,
     4, 8, 16 steps per sample: the log-log slope within 0.3 of the order. The default scheme, and a
     splitting, whose carried end-of-step torque is stale across a switch (re-evaluated there)."""
-    from jaxrot._fit._identify_check import check_arguments
-    from jaxrot._fit._identify_model import states
-    from jaxrot._fit._identify_problem import build_problem
-    from jaxrot._fit._identify_start import starting_point
+    from jaxrot._fit._identify._check import check_arguments
+    from jaxrot._fit._identify._model import states
+    from jaxrot._fit._identify._problem import build_problem
+    from jaxrot._fit._identify._start import starting_point
 
     inertia = np.array([[1.0, 0.1, 0.0], [0.1, 1.6, -0.05], [0.0, -0.05, 2.1]])
     q0, omega0 = quat.exp(jnp.array([0.2, -0.1, 0.4])), jnp.array([0.4, -0.3, 1.1])

@@ -1,8 +1,9 @@
-"""The fit's start: angular velocities by finite differences and a linear inertia estimate.
+"""What both fits' starts are made of: angular velocities by finite differences and a linear inertia estimate.
 
 The angular-momentum balance is linear in the tensor and the initial momentum
-(`_linear_estimate`); solved by least squares it lands within ~0.3 % of the
+(`linear_estimate`); solved by least squares it lands within ~0.3 % of the
 tensor, inside the basin of the nonlinear fit, so no multi-start is needed.
+Each stack's ``_start`` module builds its start from these.
 """
 
 import jax
@@ -10,8 +11,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
-from .._validation import check_finite_array
-from ._parameterisation import _Params, cholesky_from_inertia, inertia_from_cholesky
 
 
 @jax.jit
@@ -74,7 +73,7 @@ def estimate_omega(t, q):
     return omega
 
 
-def _linear_estimate(t, q, omega, torque, args, dtype, extra_impulse=None):
+def linear_estimate(t, q, omega, torque, args, dtype, extra_impulse=None):
     """Inertia from the angular-momentum balance ``R_k I ω_b,k − L₀ = ∫₀^{t_k} τ dt``, linear in ``(I, L₀)``.
 
     Torque-free the system is homogeneous: ``(I, L₀)`` is its smallest right
@@ -121,39 +120,3 @@ def _linear_estimate(t, q, omega, torque, args, dtype, extra_impulse=None):
             return np.eye(3) / 3, None
         inertia, momentum = inertia / trace, momentum / trace
     return inertia, momentum
-
-
-def _start_params(observations, *, torque, args, unit_trace, segments, inertia0, omega0) -> _Params:
-    """The parameters the optimiser starts from, for `_Observations` and `fit_inertia`'s options.
-
-    The tensor is ``inertia0`` or the linear estimate; ``ω0`` is ``omega0``, or (one
-    segment) ``R₀ I⁻¹ R₀ᵀ L₀`` from the estimate's momentum, else the differenced
-    ``ω`` at each segment start; the orientation offsets are zero.
-    """
-    dtype, bounds, omega_est = observations.dtype, observations.bounds, observations.omega_estimate
-
-    momentum = None
-    if inertia0 is None:
-        start, momentum = _linear_estimate(observations.t, observations.q, omega_est, torque, args, dtype)
-    else:
-        start = check_finite_array(inertia0, "inertia0", (3, 3), "(3, 3) tensor")
-    chol = cholesky_from_inertia(start)
-    if unit_trace:
-        # Only the shape of S is determined: L₀₀ stays at its start value (it is not a fit parameter).
-        chol = chol / chol[0]
-    start_omega = np.array(omega_est[bounds[:-1]])
-    if momentum is not None and omega0 is None and segments == 1:
-        # ω0 = R₀ I⁻¹ R₀ᵀ L₀ from the momentum fitted to all samples: far better than differencing.
-        start_tensor = np.asarray(inertia_from_cholesky(jnp.asarray(chol), unit_trace=unit_trace))
-        rot0 = np.asarray(quat.to_matrix(jnp.asarray(observations.q[0])))
-        candidate = rot0 @ np.linalg.solve(start_tensor, rot0.T @ momentum)
-        if np.all(np.isfinite(candidate)):
-            start_omega[0] = candidate
-    if omega0 is not None:
-        omega0 = check_finite_array(omega0, "omega0", (3,), "world-frame (3,) vector")
-        start_omega[0] = omega0
-    return _Params(
-        chol=jnp.asarray(chol, dtype),
-        dq=jnp.zeros((segments, 3), dtype),
-        omega=jnp.asarray(start_omega, dtype),
-    )

@@ -40,62 +40,13 @@ Gauss–Newton iteration holds ``J`` (``n_residuals × n_free``) rather than the
 per-step tape that ``jax.linearize`` of the rollout would keep.
 """
 
-from typing import NamedTuple
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
-import optax
 from jax.extend.core import jaxpr_as_fun
-
-from ._objective import _residuals, _value_and_grad
-from ._parameterisation import _flat, _Params, _unflat
 
 
 MAX_REJECTIONS = 40  # consecutive Armijo halvings before giving up: the step is then 2⁻⁴⁰ of Gauss–Newton's
-
-
-class _Optimised(NamedTuple):
-    """Where `_optimise` stopped."""
-
-    params: _Params
-    loss_history: (
-        np.ndarray
-    )  # (n_iterations + 1,) float64: the objective before each iteration, and at the end
-    n_iterations: int  # Adam steps + Gauss–Newton iterations
-    converged: bool  # stopped on ftol or the round-off floor, not on max_iter or a failed search
-
-
-def _round_off_floor(problem, omega_scale):
-    """The objective of a fit limited only by round-off: a fit that reaches it has converged.
-
-    Each of the ``n`` steps of a segment rounds the state by about eps of the dtype
-    (relative: a few ulp of random sign), so a model that reproduces the observations
-    exactly in real arithmetic misses them in floating point by up to
-    ``θ = (n + 1) eps`` rad: the step errors added up linearly (the worst case; random
-    signs give ~√n eps), plus the observations' own rounding. Angular velocities are
-    then off by up to ``θ ω_max`` (``omega_scale``: the largest observed or estimated
-    ``|ω|``). The floor is the objective with every residual of that size:
-    ``θ²`` for the orientations, ``+ omega_weight (θ ω_max)²`` when ω is observed,
-    ``+ continuity_weight θ² (1 + (spacing ω_max)²)`` with several segments.
-    """
-    eps = float(jnp.finfo(problem.data.t.dtype).eps)
-    angle = (problem.n_outer * problem.n_inner + 1) * eps
-    floor = angle**2
-    if problem.data.omega is not None:
-        floor += problem.omega_weight * (angle * omega_scale) ** 2
-    if problem.data.q.shape[0] > 1:
-        floor += problem.continuity_weight * angle**2 * (1 + (problem.spacing * omega_scale) ** 2)
-    return floor
-
-
-def _inertia_residuals(z, data):
-    """`fit_inertia`'s residual vector at the free coordinates ``z`` (the rest of ``x`` fixed)."""
-    x, free, like, problem = data
-    return _residuals(_unflat(x.at[free].set(z), like, z.dtype), problem)[0]
-
-
 ARMIJO_SLOPE = 0.1  # accept a step that achieves this fraction of the decrease its slope predicts
 ARMIJO_FACTOR = 0.5  # and halve it otherwise
 
@@ -129,7 +80,7 @@ def _least_squares_step(jac, r, minimum_norm):
 def _converged(f, predicted, ftol, floor):
     """Whether the objective ``f`` (predicted next decrease ``predicted``) is as low as it can be shown to go.
 
-    ``floor`` is the objective of residuals that are round-off only (`_round_off_floor`);
+    ``floor`` is the objective of residuals that are round-off only (`fit_inertia`'s ``round_off_floor``);
     the objective itself is then uncertain by up to ``2 √(f · floor)`` (Cauchy–Schwarz
     on ``Σ 2 rᵢ δᵢ``), and a smaller predicted decrease cannot be verified by any
     step. Measured on the noise-free satellite of the tests with ``rkmk_dopri5`` at 3
@@ -249,35 +200,3 @@ def gauss_newton(
 
     z, r, jac, aux, _, _, _, _, history, n, _, _, _, converged = jax.lax.while_loop(cond, body, carry)
     return z, history, n, converged, r, jac, aux
-
-
-def _optimise(
-    params, problem, free, *, adam_steps, adam_learning_rate, max_iter, ftol, floor
-) -> "_Optimised":
-    """Adam warm-up (optional, eager), then Gauss–Newton (`gauss_newton`) over the ``free`` coordinates."""
-    dtype = params.chol.dtype
-    x = _flat(params)
-    history = []
-    if adam_steps:
-        adam = optax.adam(adam_learning_rate)
-        state = adam.init(jnp.asarray(x[free]))
-        adam_update = jax.jit(adam.update)
-        for _ in range(adam_steps):
-            value, grad = _value_and_grad(_unflat(x, params, dtype), problem)
-            history.append(float(value))
-            with jax.numpy_dtype_promotion("standard"):
-                step, state = adam_update(jnp.asarray(_flat(grad)[free]), state)
-            x = x.copy()
-            x[free] += np.asarray(step)
-    z, gn_history, n, converged, _, _, _ = gauss_newton(
-        _inertia_residuals,
-        jnp.asarray(x[free], dtype),
-        (jnp.asarray(x, dtype), jnp.asarray(free), params, problem),
-        jnp.asarray(ftol, dtype),
-        jnp.asarray(floor, dtype),
-        max_iter,
-    )
-    n = int(n)
-    x[free] = np.asarray(z, np.float64)
-    history.extend(np.asarray(gn_history[: n + 1], np.float64).tolist())
-    return _Optimised(_unflat(x, params, dtype), np.asarray(history), adam_steps + n, bool(converged))

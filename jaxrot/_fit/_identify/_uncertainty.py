@@ -1,6 +1,6 @@
 """`identify`'s fifth stage: the labelled parameters, their covariance and standard errors.
 
-``Cov(φ̂) ≈ (JᵀJ)⁻¹`` of the whitened residuals at the optimum (`_uncertainty.analyse`),
+``Cov(φ̂) ≈ (JᵀJ)⁻¹`` of the whitened residuals at the optimum (`_covariance.analyse`),
 carried to the user's units by the delta method through ``∂p/∂φ`` (forward mode, exact);
 parameters that an undetermined direction moves are named and get infinite errors.
 Every parameter has a typical size (``scale``) in its own units, against which "moves"
@@ -14,9 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._identify_model import split, unpack
+from .._covariance import analyse, propagate
+from ._model import split, unpack
 from ._sensors import SENSORS, sensor_labels
-from ._uncertainty import analyse, propagate
 
 
 ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
@@ -125,7 +125,7 @@ def _parameter_jacobians(phi, layout, data, free_inertia):
 
 
 def uncertainty(solution, settings) -> Uncertainties:
-    """The `Uncertainties` of a `_identify_solve.Solution`."""
+    """The `Uncertainties` of a `_solve.Solution`."""
     model = solution.model
     dtype = settings.dtype
     g, g_all, fitted, g_values = _parameter_jacobians(

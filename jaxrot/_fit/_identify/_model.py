@@ -21,11 +21,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import quaternion as quat
-from .._inertia import body_inertia
-from .._state import RotState
-from ._objective import signed_vector
-from ._parameterisation import inertia_from_cholesky
+from ... import quaternion as quat
+from ..._inertia import body_inertia
+from ..._state import RotState
+from .._misfit import signed_vector
+from .._parameterisation import inertia_from_cholesky
 
 
 # Step and sample indices: the default integer of the x64 setting, as `jnp.arange` makes them.

@@ -14,7 +14,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .. import quaternion as quat
+from ... import quaternion as quat
 
 
 # A control time within this fraction of the record's span of a sample time is that sample time:

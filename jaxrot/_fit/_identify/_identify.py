@@ -1,28 +1,23 @@
 """`identify`: a rigid body's parameters from several experiments' telemetry, with their uncertainty.
 
-Six named stages, each in its own module: check every argument (`_identify_check`) →
-the start (`_identify_start`) → the model and ``φ₀`` (`_identify_problem`, on the model of
-`_identify_model`) → Gauss–Newton (`_identify_solve`) → the uncertainty
-(`_identify_uncertainty`) → the `Identification` (`_identification`, its report `_report`).
+Six named stages, each in its own module: every argument checked, the `Settings`
+(`_check`) → the `Start` (`_start`) → the `Problem`, the `Model` and ``φ₀`` (`_problem`,
+on the model and its `residuals` in `_model`) → Gauss–Newton, the `Solution` (`_solve`) →
+the uncertainty (`_uncertainty`) → the result, an `Identification` (`_result`, its report
+`_report`).
 """
 
 import warnings
 from collections.abc import Sequence
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from .._state import Trajectory
-from ..schemes import RKMKDopri5
-from ._experiment import KINDS, Experiment
-from ._identification import Identification, StandardErrors
-from ._identify_check import check_arguments
-from ._identify_problem import build_problem
-from ._identify_solve import solve
-from ._identify_start import starting_point
-from ._identify_uncertainty import uncertainty
-from ._uncertainty import correlations
+from ...schemes import RKMKDopri5
+from ._check import check_arguments
+from ._experiment import Experiment
+from ._problem import build_problem
+from ._result import Identification, result
+from ._solve import solve
+from ._start import starting_point
+from ._uncertainty import uncertainty
 
 
 # The default scheme: see `identify`'s docstring for the measurements behind it.
@@ -190,57 +185,4 @@ def identify(
             "parameters is undetermined). Fix them, or add experiments or observations that excite them.",
             stacklevel=2,
         )
-    return _result(settings, problem, solution, found)
-
-
-def _result(settings, problem, solution, found) -> Identification:
-    """The `Identification` of a solved problem."""
-    dtype = settings.dtype
-    data = solution.model.data
-    sigma = np.asarray(data.sigma, np.float64)
-    whitened = solution.raw / sigma[:, :, None, None]
-    q_fit, omega_world = solution.states
-    trajectories, residual_dicts = [], []
-    for j, e in enumerate(settings.experiments):
-        n = e.t.shape[0]
-        trajectories.append(
-            Trajectory(
-                jnp.asarray(e.t, dtype),
-                jnp.asarray(q_fit[j, :n], dtype),
-                jnp.asarray(omega_world[j, :n], dtype),
-            )
-        )
-        parts = {}
-        for a, (name, _, _, _) in enumerate(KINDS):
-            if settings.counts[j, a]:
-                r = whitened[j, a, :n].copy()
-                r[np.asarray(data.weight)[j, a, :n] == 0] = np.nan
-                parts[name] = r
-        residual_dicts.append(parts)
-    inertia, args, q0, omega0, sensors = found.fitted
-    se_inertia, se_args, se_q0, se_omega0, se_sensors = found.stderr
-    fitted_args = any(leaf.mode is not None or leaf.per_experiment is not None for leaf in settings.leaves)
-    return Identification(
-        inertia=jnp.asarray(inertia, dtype),
-        args=jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype), args) if fitted_args else settings.args,
-        q0=jnp.asarray(q0, dtype),
-        omega0=jnp.asarray(omega0, dtype),
-        sensors={name: jnp.asarray(value, dtype) for name, value in sensors.items()},
-        stderr=StandardErrors(se_inertia, se_args, se_q0, se_omega0, se_sensors),
-        covariance=found.covariance,
-        names=found.names,
-        units=found.units,
-        estimates=found.estimates,
-        correlation=correlations(found.covariance),
-        unidentified=found.unidentified,
-        converged=solution.converged,
-        sigma=np.where(settings.counts > 0, sigma, np.nan),
-        residuals=residual_dicts,
-        trajectories=trajectories,
-        loss=float(solution.history[-1]),
-        loss_history=solution.history,
-        n_iterations=solution.n_iterations,
-        scale_determined=not settings.unit_scale,
-        dt=problem.max_step,
-        scheme=settings.scheme_arg,
-    )
+    return result(settings, problem, solution, found)

@@ -23,7 +23,9 @@ import numpy as np
 INVOLVED = 0.3
 
 
-class Uncertainty(NamedTuple):
+class Covariance(NamedTuple):
+    """The covariance of the user parameters ``p`` and of ``φ``, and what the data do not determine."""
+
     covariance: np.ndarray  # (p, p) in the user's units; inf rows and columns where undetermined
     stderr: np.ndarray  # (p,)
     unidentified: tuple  # labels
@@ -32,7 +34,7 @@ class Uncertainty(NamedTuple):
 
 
 def analyse(jac, g, scale, labels, rcond):
-    """The `Uncertainty` of the user parameters ``p`` (Jacobian ``g = ∂p/∂φ``, typical sizes ``scale``)."""
+    """The `Covariance` of the user parameters ``p`` (Jacobian ``g = ∂p/∂φ``, typical sizes ``scale``)."""
     g = np.asarray(g, np.float64)
     d, s, vt = (np.asarray(x, np.float64) for x in _scaled_svd(jnp.asarray(jac)))
     keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
@@ -50,7 +52,7 @@ def analyse(jac, g, scale, labels, rcond):
     covariance[involved, :] = np.inf
     covariance[:, involved] = np.inf
     named = tuple(label for label, b in zip(labels, bad, strict=True) if b)
-    return Uncertainty(covariance, stderr, named, cov_phi, null)
+    return Covariance(covariance, stderr, named, cov_phi, null)
 
 
 @jax.jit

@@ -1,4 +1,8 @@
-"""The fit's set-up: checked observations, cut into padded segments, and the model's configuration."""
+"""`fit_inertia`'s set-up: the checked observations (`Settings`), and the `Model` the residuals roll out.
+
+The `Model` holds the observations cut into padded `Segments` and the static configuration
+of the rollout (scheme, torque, steps, checkpointing, weights).
+"""
 
 import math
 from typing import NamedTuple
@@ -8,16 +12,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validation import check_int, check_observed, check_torque
-from ..schemes import resolve_scheme
-from ._initial import estimate_omega
+from ..._validation import check_int, check_observed, check_torque
+from ...schemes import resolve_scheme
+from .._initial import estimate_omega
 
 
 # The default time step turns the body by at most this angle (radians) per step.
 DEFAULT_STEP_ANGLE = 0.01
 
 
-class _Segments(NamedTuple):
+class Segments(NamedTuple):
     """Observations cut into ``K`` segments, each padded to ``P`` intervals (+ chunk padding)."""
 
     t: jax.Array  # (K, P + 1)      padded by repeating the last time: dt = 0 steps are no-ops
@@ -27,10 +31,10 @@ class _Segments(NamedTuple):
     q_start: jax.Array  # (K, 4) observed orientation at each segment start
 
 
-class _Problem(eqx.Module):
-    """What the objective needs: the segmented data and the static configuration of the model."""
+class Model(eqx.Module):
+    """What the residuals need: the segmented data and the static configuration of the rollout."""
 
-    data: _Segments
+    data: Segments
     args: object
     scheme: object = eqx.field(static=True)
     torque: object = eqx.field(static=True)
@@ -44,8 +48,9 @@ class _Problem(eqx.Module):
     spacing: float = eqx.field(static=True)  # mean observation interval: scales ω mismatches to rad
 
 
-class _Observations(NamedTuple):
-    """The checked observations (float64 NumPy arrays) and what the set-up derived from them."""
+class Settings(NamedTuple):
+    """The checked observations (float64 NumPy arrays) and what the set-up derived from them: what the start
+    and the result read."""
 
     t: np.ndarray  # (n,)
     q: np.ndarray  # (n, 4) unit, sign-continuous
@@ -55,7 +60,7 @@ class _Observations(NamedTuple):
     dtype: np.dtype  # the float dtype the fit runs in
 
 
-def _build_problem(
+def build_model(
     observed,
     *,
     torque,
@@ -72,7 +77,7 @@ def _build_problem(
     omega_estimate=None,
     normalize=False,
 ):
-    """The `_Problem` (validated, padded data and the static configuration) and the `_Observations`."""
+    """The `Model` (validated, padded data and the static configuration) and the `Settings`."""
     scheme = resolve_scheme(scheme)
     check_torque(torque)
     t, q, omega, dtype = check_observed(observed, normalize)
@@ -124,14 +129,14 @@ def _build_problem(
         weights.append(weight)
         if omega is not None:
             ws.append(omega[idx])
-    data = _Segments(
+    data = Segments(
         t=jnp.asarray(np.stack(ts), dtype),
         q=jnp.asarray(np.stack(qs), dtype),
         omega=None if omega is None else jnp.asarray(np.stack(ws), dtype),
         weight=jnp.asarray(np.stack(weights), dtype),
         q_start=jnp.asarray(q[bounds[:-1]], dtype),
     )
-    problem = _Problem(
+    model = Model(
         data=data,
         args=args,
         scheme=scheme,
@@ -145,4 +150,4 @@ def _build_problem(
         continuity_weight=float(continuity_weight),
         spacing=float((t[-1] - t[0]) / (n - 1)),
     )
-    return problem, _Observations(t, q, omega, omega_estimate, bounds, dtype)
+    return model, Settings(t, q, omega, omega_estimate, bounds, dtype)

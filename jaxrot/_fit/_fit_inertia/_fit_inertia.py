@@ -1,4 +1,5 @@
-"""`fit_inertia`, the public entry point: set-up, start, optimiser, and the `FitResult`."""
+"""`fit_inertia`, the public entry point: it runs the stages (`_model` → `_start` → `_solve`) and returns
+the `FitResult`."""
 
 from typing import NamedTuple
 
@@ -6,14 +7,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import quaternion as quat
-from .._state import Trajectory
-from .._validation import check_int, check_weight
-from ._initial import _start_params
-from ._objective import _residuals, _unpack
-from ._optimiser import _optimise, _round_off_floor
-from ._parameterisation import inertia_from_cholesky
-from ._problem import _build_problem
+from ... import quaternion as quat
+from ..._state import Trajectory
+from ..._validation import check_int, check_weight
+from .._parameterisation import inertia_from_cholesky
+from ._model import build_model
+from ._residuals import residuals, unpack
+from ._solve import round_off_floor, solve
+from ._start import starting_point
 
 
 class FitResult(NamedTuple):
@@ -196,7 +197,7 @@ def fit_inertia(
     adam_steps = check_int(adam_steps, "adam_steps", 0)
     max_iter = check_int(max_iter, "max_iter", 0)
     unit_trace = torque is None
-    problem, observations = _build_problem(
+    model, settings = build_model(
         observed,
         torque=torque,
         args=args,
@@ -211,8 +212,8 @@ def fit_inertia(
         continuity_weight=continuity_weight,
         normalize=normalize,
     )
-    params = _start_params(
-        observations,
+    params = starting_point(
+        settings,
         torque=torque,
         args=args,
         unit_trace=unit_trace,
@@ -222,35 +223,35 @@ def fit_inertia(
     )
     initial_inertia = inertia_from_cholesky(params.chol, unit_trace=unit_trace)
     free = np.arange(1 if unit_trace else 0, 6 + 6 * segments)
-    params, loss_history, n_iterations, converged = _optimise(
+    params, loss_history, n_iterations, converged = solve(
         params,
-        problem,
+        model,
         free,
         adam_steps=adam_steps,
         adam_learning_rate=float(adam_learning_rate),
         max_iter=max_iter,
         ftol=float(ftol),
-        floor=_round_off_floor(problem, float(np.max(np.linalg.norm(observations.omega_estimate, axis=-1)))),
+        floor=round_off_floor(model, float(np.max(np.linalg.norm(settings.omega_estimate, axis=-1)))),
     )
-    loss_history = jnp.asarray(loss_history, observations.dtype)
+    loss_history = jnp.asarray(loss_history, settings.dtype)
 
-    inertia, q_start = _unpack(params, problem)
+    inertia, q_start = unpack(params, model)
     moments, axes = jnp.linalg.eigh(inertia)
-    _, q_seg, omega_seg = _residuals(params, problem)
-    n = observations.t.shape[0]
+    _, q_seg, omega_seg = residuals(params, model)
+    n = settings.t.shape[0]
     q_fit = np.empty((n, 4))
     omega_fit = np.empty((n, 3))
-    bounds = observations.bounds
+    bounds = settings.bounds
     for s in range(segments):
         lo, hi = bounds[s], bounds[s + 1]
         q_fit[lo : hi + 1] = np.asarray(q_seg[s, : hi - lo + 1])
         omega_fit[lo : hi + 1] = np.asarray(omega_seg[s, : hi - lo + 1])
     trajectory = Trajectory(
-        jnp.asarray(observations.t, observations.dtype),
-        jnp.asarray(q_fit, observations.dtype),
-        jnp.asarray(omega_fit, observations.dtype),
+        jnp.asarray(settings.t, settings.dtype),
+        jnp.asarray(q_fit, settings.dtype),
+        jnp.asarray(omega_fit, settings.dtype),
     )
-    obs_q = jnp.asarray(observations.q, observations.dtype)
+    obs_q = jnp.asarray(settings.q, settings.dtype)
     rms = jnp.sqrt(jnp.mean(quat.angle_between(trajectory.q, obs_q) ** 2))
     return FitResult(
         inertia=inertia,
@@ -265,6 +266,6 @@ def fit_inertia(
         converged=bool(converged),
         n_iterations=n_iterations,
         initial_inertia=initial_inertia,
-        dt=float(np.max(np.diff(observations.t))) / problem.substeps,
+        dt=float(np.max(np.diff(settings.t))) / model.substeps,
         scale_determined=not unit_trace,
     )

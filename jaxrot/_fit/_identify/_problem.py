@@ -1,8 +1,8 @@
 """`identify`'s third stage: the model and its starting parameter vector ``φ₀``.
 
-The experiments become padded arrays (`_identify_model.Data`), the fitted and held
-parameters a `_identify_model.Layout`, the step grids of their controls and samples
-`_controls.StepGrid`s, and the starts of `_identify_start.Start` the vector ``φ₀``.
+The experiments become padded arrays (`_model.Data`), the fitted and held
+parameters a `_model.Layout`, the step grids of their controls and samples
+`_controls.StepGrid`s, and the starts of `_start.Start` the vector ``φ₀``.
 """
 
 from typing import NamedTuple
@@ -10,10 +10,10 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from .._parameterisation import cholesky_from_inertia
 from ._controls import ControlledTorque, pad_grid, step_grid
 from ._experiment import KINDS
-from ._identify_model import INDEX, Data, Layout, Model, n_head, pad_rows
-from ._parameterisation import cholesky_from_inertia
+from ._model import INDEX, Data, Layout, Model, n_head, pad_rows
 
 
 class Problem(NamedTuple):
@@ -58,7 +58,7 @@ def build_problem(settings, start) -> Problem:
     obs = {name: [] for name in fill}
     weights, sigmas = [], []
     for e in experiments:
-        # Raw readings: the model reads like the sensors (`_identify_model`), held parameters and all.
+        # Raw readings: the model reads like the sensors (`_model`), held parameters and all.
         observed = {"q": e.q, "omega_body": e.omega_body, "direction": e.direction}
         w_kinds, s_kinds = [], []
         for name, sigma_name, _, _ in KINDS:

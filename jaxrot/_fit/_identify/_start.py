@@ -1,6 +1,6 @@
 """`identify`'s second stage: where the fit starts, and the model's largest step.
 
-The tensor comes from the linear angular-momentum balance (`_initial._linear_estimate`)
+The tensor comes from the linear angular-momentum balance (`_initial.linear_estimate`)
 of the experiment with the most orientation samples, each experiment's initial state
 from its first samples (or, for that experiment, from the balance's momentum), and the
 step from the largest angular velocity seen. Observations enter with the held sensor
@@ -12,10 +12,10 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from .. import quaternion as quat
-from .._validation import sign_continuous
+from ... import quaternion as quat
+from ..._validation import sign_continuous
+from .._initial import estimate_omega, linear_estimate, multiply_np, rotate_np
 from ._controls import step_grid
-from ._initial import _linear_estimate, estimate_omega, multiply_np, rotate_np
 from ._sensors import corrected_gyro
 
 
@@ -160,9 +160,9 @@ def _inertia_estimate(settings, j):
         impulse = control_impulse(t_rows, q_rows, e.control, e.control_hold, e.control_frame)
     torque = settings.torque
     if torque is None and impulse is None:
-        estimate, momentum = _linear_estimate(t_rows, q_rows, omega_world, None, None, settings.dtype)
+        estimate, momentum = linear_estimate(t_rows, q_rows, omega_world, None, None, settings.dtype)
     else:
-        estimate, momentum = _linear_estimate(
+        estimate, momentum = linear_estimate(
             t_rows, q_rows, omega_world, torque, experiment_args(settings, j), settings.dtype,
             extra_impulse=impulse,
         )  # fmt: skip

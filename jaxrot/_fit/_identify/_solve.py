@@ -6,7 +6,7 @@ Gauss–Newton's linear model can lead it into another minimum (seen: a gyro del
 −132 s). Over a short window the same error is a small misfit. So the fit runs over the
 first 1/16, 1/8, … of every record's steps (each window holding at least `WINDOW_DATA`
 times as many informative residuals as parameters), each from the last one's optimum, and
-ends on the whole record. A window's steps past its end are skipped (`_identify_model`), so
+ends on the whole record. A window's steps past its end are skipped (`_model`), so
 it costs its share of the record; all windows run one compiled program.
 
 Noise: a kind whose σ is not given has it estimated from its residuals,
@@ -20,9 +20,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._optimiser import gauss_newton
 from ._experiment import KINDS
-from ._identify_model import INDEX, residuals, residuals_and_jacobian
-from ._optimiser import gauss_newton
+from ._model import INDEX, residuals, residuals_and_jacobian
 
 
 WINDOW_DATA = 5  # informative residuals per parameter in the first window
@@ -80,7 +80,7 @@ def _run(phi, model, floor, ftol, settings):
 
 
 def solve(problem, settings, speed) -> Solution:
-    """Fit ``problem`` (`_identify_problem.Problem`) under ``settings``; ``speed`` is the largest ``|ω|`` of
+    """Fit ``problem`` (`_problem.Problem`) under ``settings``; ``speed`` is the largest ``|ω|`` of
     the start (the round-off floor's angular velocities)."""
     model = problem.model
     eps = float(jnp.finfo(settings.dtype).eps)

@@ -1,11 +1,15 @@
-"""`Identification`, what `jaxrot.identify` returns, and its `StandardErrors`."""
+"""`identify`'s last stage: the `Identification` it returns, and its `StandardErrors`."""
 
 from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
+from ..._state import Trajectory
+from .._covariance import correlations
 from . import _report
+from ._experiment import KINDS
 
 
 class StandardErrors(NamedTuple):
@@ -110,3 +114,56 @@ class Identification(NamedTuple):
         a notebook shows it as a cell's value once pyplot is imported; elsewhere ``fig.savefig(path)``.
         """
         return _report.plot_residuals(self)
+
+
+def result(settings, problem, solution, found) -> Identification:
+    """The `Identification` of a solved problem (`_solve.Solution`) and its `_uncertainty.Uncertainties`."""
+    dtype = settings.dtype
+    data = solution.model.data
+    sigma = np.asarray(data.sigma, np.float64)
+    whitened = solution.raw / sigma[:, :, None, None]
+    q_fit, omega_world = solution.states
+    trajectories, residual_dicts = [], []
+    for j, e in enumerate(settings.experiments):
+        n = e.t.shape[0]
+        trajectories.append(
+            Trajectory(
+                jnp.asarray(e.t, dtype),
+                jnp.asarray(q_fit[j, :n], dtype),
+                jnp.asarray(omega_world[j, :n], dtype),
+            )
+        )
+        parts = {}
+        for a, (name, _, _, _) in enumerate(KINDS):
+            if settings.counts[j, a]:
+                r = whitened[j, a, :n].copy()
+                r[np.asarray(data.weight)[j, a, :n] == 0] = np.nan
+                parts[name] = r
+        residual_dicts.append(parts)
+    inertia, args, q0, omega0, sensors = found.fitted
+    se_inertia, se_args, se_q0, se_omega0, se_sensors = found.stderr
+    fitted_args = any(leaf.mode is not None or leaf.per_experiment is not None for leaf in settings.leaves)
+    return Identification(
+        inertia=jnp.asarray(inertia, dtype),
+        args=jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype), args) if fitted_args else settings.args,
+        q0=jnp.asarray(q0, dtype),
+        omega0=jnp.asarray(omega0, dtype),
+        sensors={name: jnp.asarray(value, dtype) for name, value in sensors.items()},
+        stderr=StandardErrors(se_inertia, se_args, se_q0, se_omega0, se_sensors),
+        covariance=found.covariance,
+        names=found.names,
+        units=found.units,
+        estimates=found.estimates,
+        correlation=correlations(found.covariance),
+        unidentified=found.unidentified,
+        converged=solution.converged,
+        sigma=np.where(settings.counts > 0, sigma, np.nan),
+        residuals=residual_dicts,
+        trajectories=trajectories,
+        loss=float(solution.history[-1]),
+        loss_history=solution.history,
+        n_iterations=solution.n_iterations,
+        scale_determined=not settings.unit_scale,
+        dt=problem.max_step,
+        scheme=settings.scheme_arg,
+    )
