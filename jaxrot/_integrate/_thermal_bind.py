@@ -5,8 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core._checks import check_values
 from .._particles import unwrap_per_body
-from .._validation import check_values
 from ..schemes import THERMAL_SCHEMES
 from ..schemes._brownian import (
     BROWNIAN_SCHEMES,
@@ -28,7 +28,7 @@ def without_temperature(fluid, scheme_name: str, key, langevin: bool = True):
     ``key`` is given (without one, `jaxrot._fluid._fluid.check_fluid` has checked it already).
 
     Concrete ``kT``: ValueError now, naming the schemes that take the noise; traced: at run time
-    (`jaxrot._validation.check_values`: use the returned values)."""
+    (`jaxrot._core._checks.check_values`: use the returned values)."""
     if key is None:
         return fluid
     capable = _names(THERMAL_SCHEMES if langevin else BROWNIAN_SCHEMES)
