@@ -59,3 +59,40 @@ from .schemes import (
 
 
 __version__ = importlib.metadata.version("jaxrot")
+
+
+# Every public name above but the submodules; tests/test_structure.py checks that none is missing.
+__all__ = [
+    "AbstractScheme",
+    "BROWNIAN_SCHEMES",
+    "BodyInertia",
+    "Checkpoint",
+    "Drive",
+    "Experiment",
+    "FLUID_SCHEMES",
+    "FitResult",
+    "Fluid",
+    "Identification",
+    "IntegrationError",
+    "MathematicalBody",
+    "OVERDAMPED_SCHEMES",
+    "RigidBodyTerm",
+    "RotState",
+    "SCENES",
+    "SCHEMES",
+    "Scene",
+    "THERMAL_SCHEMES",
+    "Trajectory",
+    "body_inertia",
+    "compiler_options",
+    "fit_inertia",
+    "identify",
+    "load_checkpoint",
+    "overdamped_rollout",
+    "per_body",
+    "reference_rollout",
+    "rollout",
+    "rollout_chunks",
+    "save_checkpoint",
+    "solver",
+]

@@ -1,4 +1,4 @@
-"""Eager input checks: a clear ``ValueError`` before anything compiles.
+"""Eager input checks of a run: a clear ``ValueError`` before anything compiles.
 
 Shape checks always run (shapes are static, even under ``jit``). Value checks
 (finite, unit norm, positive definite, …) run only on concrete arrays; on
@@ -8,9 +8,11 @@ global reduction, which a sharded rollout would have to communicate
 (tests/test_sharding.py asserts that per-body torques communicate nothing), and
 non-finite states inside ``jit`` are what ``rollout(..., runtime_check=True)``
 reports, with the step they appeared at. Results that only exist at run time (a
-failed reference solve) go through `check_values`: one path that raises now for
-concrete values and at run time for traced ones.
+failed reference solve) go through `jaxrot._core._checks.check_values`: one path that raises now
+for concrete values and at run time for traced ones.
 
+Here: the state, the bodies, the times and steps of a run, the torque. The generic value checks
+(dtypes, `check_values`) are `jaxrot._core._checks`'; the inertia's, `jaxrot._inertia`'s.
 `jaxrot.fit_inertia`'s checks (`check_observed`, `check_int`, `check_weight`,
 `check_finite_array`) live here too; they reject traced inputs instead, as the fit
 runs its optimiser eagerly.
@@ -18,64 +20,13 @@ runs its optimiser eagerly.
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._core._concrete import is_concrete as is_concrete
-from ._inertia import MathematicalBody
+from ._core._checks import QUATERNION_NORM_TOL, declared_dtype, float_dtype, is_concrete
+from ._inertia import check_inertia
 from ._state import RotState
-
-
-QUATERNION_NORM_TOL = 1e-6
-SUPPORTED_DTYPES = ("float32", "float64")
-
-
-def check_values(x, failed, message, error=ValueError):
-    """``x``, after checking that ``failed`` (a boolean array) holds nowhere.
-
-    Concrete ``failed``: raises ``error(message)`` now. Traced: returns ``x`` with an
-    ``eqx.error_if`` attached, which raises at run time; use the returned value, or
-    the check is dropped with the unused branch.
-    """
-    if is_concrete(failed):
-        if np.any(np.asarray(failed)):
-            raise error(message)
-        return x
-    return eqx.error_if(x, failed, message)
-
-
-def float_dtype(*xs):
-    """The floating dtype results are computed in: that of the inputs, or JAX's default."""
-    dtype = jnp.result_type(*xs)
-    if not jnp.issubdtype(dtype, jnp.floating):
-        dtype = jnp.result_type(float)
-    return dtype
-
-
-def declared_dtype(x, name):
-    """The floating dtype that ``x`` declares, or None when it declares none.
-
-    Python numbers and lists, weakly typed scalars and integer or boolean arrays
-    declare none: they take the dtype of the other inputs. A complex array, or a
-    floating one other than float32 and float64 (float16, bfloat16, ...), is a
-    ``ValueError`` naming ``name``: it would otherwise fail later as a misleading
-    "not unit" quaternion (float16 rounds |q| by ~5e-4).
-    """
-    dtype = getattr(x, "dtype", None)
-    if dtype is None or getattr(x, "weak_type", False):
-        return None
-    dtype = np.dtype(dtype)
-    if jnp.issubdtype(dtype, jnp.complexfloating) or (
-        jnp.issubdtype(dtype, jnp.floating) and dtype.name not in SUPPORTED_DTYPES
-    ):
-        raise ValueError(
-            f"`{name}` has dtype {dtype.name}; jaxrot computes in float32 or float64 only, and "
-            "state.q and state.omega must share one of them (the inertia is cast to it). Cast it with "
-            ".astype(jnp.float32) or .astype(jnp.float64)."
-        )
-    return dtype if jnp.issubdtype(dtype, jnp.floating) else None
 
 
 def check_state(state, *, normalize=False, name="state") -> RotState:
@@ -121,142 +72,6 @@ def check_state(state, *, normalize=False, name="state") -> RotState:
     if normalize:
         q = q / jnp.linalg.norm(q, axis=-1, keepdims=True)
     return RotState(q, omega)
-
-
-def check_inertia(inertia, batch_shape, dtype, name="inertia", *, runtime=True):
-    """Validate an inertia for particles with leading shape ``batch_shape``.
-
-    Returns ``(inertia, per_particle)``; the accepted shapes, in the order they
-    are matched, are ``batch + (3, 3)``, ``(3, 3)``, ``batch + (3,)``, ``(3,)``.
-    A `jaxrot.MathematicalBody` is unwrapped and exempt from the triangle inequality.
-    Concrete values are checked now (``ValueError``); a traced shared inertia, with ``runtime``,
-    for the triangle inequality by the compiled program (the same tolerance, raised when it runs),
-    so that a body is accepted or refused alike under ``jit`` and eagerly (a NumPy or Python
-    constant is checked now, even inside ``jit``). A traced per-particle inertia is not: the check
-    would be a reduction over all bodies, which a sharded rollout would communicate.
-    """
-    physical = not isinstance(inertia, MathematicalBody)
-    if not physical:
-        inertia = inertia.inertia
-    declared_dtype(inertia, name)
-    # A NumPy or Python constant is checked now even inside `jit` (where jnp.asarray traces it).
-    concrete = is_concrete(inertia)
-    raw = np.asarray(inertia, dtype=np.float64) if concrete else None
-    inertia = jnp.asarray(inertia)
-    batch_shape = tuple(batch_shape)
-    shape = inertia.shape
-    if shape == (*batch_shape, 3, 3) and batch_shape:
-        per_particle = True
-    elif shape == (3, 3) or shape == (3,):
-        per_particle = False
-    elif shape == (*batch_shape, 3):
-        per_particle = True
-    else:
-        raise ValueError(
-            f"`{name}` must be principal moments (3,) or a full body-frame tensor (3, 3), shared, "
-            f"or one per particle with the particle axes {batch_shape} in front; got shape {shape}."
-        )
-    inertia = inertia.astype(dtype)
-    if concrete:
-        moments = check_inertia_values(raw, name, physical=physical)
-        check_conditioning(moments, dtype, name)
-    elif runtime and not per_particle:
-        inertia = _checked_in_graph(inertia, name, physical)
-    return inertia, per_particle
-
-
-def triangle_tolerance(moments):
-    """How far ``I₁ + I₂ − I₃`` may fall below zero for moments given to three significant digits.
-
-    Inertias are quoted to at least three significant digits; each rounded moment is off by up to
-    half a unit in its third digit, ``0.005 · 10^⌊log₁₀ I⌋``, so a planar body (``I₁ + I₂ = I₃``)
-    can show a violation up to the sum of the three (Hairer & Vilmart's water molecule, (0.345, 0.653,
-    1.0): 0.002 against 0.006). Works on NumPy and JAX arrays ``(..., 3)``; returns ``(...,)``.
-    """
-    xp = jnp if isinstance(moments, jax.Array) else np
-    positive = xp.where(moments > 0, moments, 1)
-    return xp.sum(0.005 * 10.0 ** xp.floor(xp.log10(positive)), axis=-1)
-
-
-def _moments_of(inertia, xp):
-    if inertia.shape[-2:] == (3, 3):
-        return xp.linalg.eigvalsh(0.5 * (inertia + xp.swapaxes(inertia, -1, -2)))
-    return inertia
-
-
-def _not_physical_message(name, slack=None):
-    by = "" if slack is None else f" by {slack:.3g},"
-    return (
-        f"`{name}` is not a physical body: it violates the triangle inequality I1 + I2 >= I3 (for "
-        f"every permutation) that every mass distribution satisfies,{by} more than the "
-        "rounding of three significant digits allows. Check the moments; to integrate a "
-        "mathematical test body anyway, pass jaxrot.MathematicalBody(inertia)."
-    )
-
-
-def _checked_in_graph(inertia, name, physical):
-    """``inertia`` with an `eqx.error_if` check of the triangle inequality within
-    `triangle_tolerance` (if ``physical``), raised when the compiled program runs.
-
-    Positive definiteness is not checked here: central differences of a needle's tiny moment step
-    across zero, and the integrators themselves do not need it (they need 1/I)."""
-    if not physical:
-        return inertia
-    moments = _moments_of(inertia, jnp)
-    slack = jnp.sum(moments, axis=-1) - 2 * jnp.max(moments, axis=-1)
-    return eqx.error_if(inertia, jnp.any(slack < -triangle_tolerance(moments)), _not_physical_message(name))
-
-
-def check_inertia_values(inertia: np.ndarray, name="inertia", *, physical=True):
-    if not np.all(np.isfinite(inertia)):
-        raise ValueError(f"`{name}` contains NaN or infinite values.")
-    if inertia.shape[-2:] == (3, 3):
-        scale = np.max(np.abs(inertia), axis=(-2, -1), keepdims=True)
-        asym = np.max(np.abs(inertia - np.swapaxes(inertia, -1, -2)) / np.where(scale > 0, scale, 1))
-        if asym > 1e-6:
-            raise ValueError(
-                f"`{name}` must be a symmetric tensor; the largest relative asymmetry is {asym:.3g}. "
-                "Pass (I + I.T) / 2 if the asymmetry is round-off."
-            )
-    moments = _moments_of(inertia, np)
-    if np.any(moments <= 0):
-        raise ValueError(
-            f"`{name}` must be positive definite (every principal moment > 0); "
-            f"the smallest principal moment is {float(np.min(moments)):.3g}."
-        )
-    if physical:
-        # A real mass distribution has I_i + I_j >= I_k for every permutation (within rounding).
-        slack = np.sum(moments, axis=-1) - 2 * np.max(moments, axis=-1)
-        excess = slack + triangle_tolerance(moments)
-        if np.any(excess < 0):
-            raise ValueError(_not_physical_message(name, -float(np.min(slack))))
-    return moments
-
-
-def check_conditioning(moments: np.ndarray, dtype, name="inertia"):
-    """Reject principal moments that ``dtype`` cannot resolve: smallest < eps × largest, or subnormal.
-
-    Below that ratio the round-off of ``ω × Iω`` (≈ eps · largest moment) divided by the
-    smallest moment swamps the motion about that axis: measured, zhao and euler return NaN
-    within 10 steps for a needle (r, 1, 1) with r ≤ 1e-20 (float64) or r ≤ 1e-12 (float32),
-    and a subnormal moment is flushed to zero on CPU and GPU.
-    """
-    info = np.finfo(dtype)
-    smallest = float(np.min(moments))
-    if smallest < float(info.tiny):
-        raise ValueError(
-            f"`{name}` has a principal moment of {smallest:.3g}, below the smallest normal "
-            f"{np.dtype(dtype).name} ({float(info.tiny):.3g}); it would be flushed to zero. "
-            "Rescale the units."
-        )
-    ratio = np.min(moments, axis=-1) / np.max(moments, axis=-1)
-    if np.any(ratio < float(info.eps)):
-        raise ValueError(
-            f"`{name}` is too ill-conditioned for {np.dtype(dtype).name}: the smallest principal moment is "
-            f"{float(np.min(ratio)):.3g} times the largest, below the resolution "
-            f"eps = {float(info.eps):.3g}, so round-off would swamp the rotation about that axis. "
-            + ("Check the moments." if info.bits == 64 else "Use float64, or check the moments.")
-        )
 
 
 def check_bodies(state, inertia, *, normalize=False):

@@ -25,7 +25,7 @@ Example:
 import jax.numpy as jnp
 
 from . import quaternion as quat
-from ._validation import float_dtype
+from ._core._checks import float_dtype
 
 
 __all__ = ["angular_momentum", "kinetic_energy", "norm_drift"]

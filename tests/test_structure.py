@@ -1,15 +1,21 @@
-"""The package's layout: its modules import one another without cycles.
+"""The package's layout: its modules import one another without cycles, and its rooms stand in floors.
 
 A module that imports another which (directly or through others) imports it back
 runs half-initialised, hides which concept depends on which, and forces lazy
 imports inside functions. The import graph is read from the source with `ast`, so
 imports inside functions count too. Importing the package runs no JAX computation.
+
+A room is a module directly under jaxrot/ or a subpackage. `FLOORS` orders the rooms from the ground
+up: a room imports only from rooms on lower floors, so the house reads bottom to top. The top level
+holds at most 12 files, no module is over 400 lines, no jaxrot import hides inside a function (the
+command line aside), and `jaxrot.__all__` lists every public name of the package.
 """
 
 import ast
 import pathlib
 import subprocess
 import sys
+import types
 
 import pytest
 
@@ -40,6 +46,25 @@ def _resolve(node: ast.ImportFrom, module: str, is_package: bool) -> str:
     return ".".join([*base, node.module] if node.module else base)
 
 
+def _import_targets(node: ast.AST, module: str, is_package: bool, modules) -> list[str]:
+    """The modules of the package (keys of ``modules``) that an import statement imports, else []."""
+    if isinstance(node, ast.Import):
+        targets = [alias.name for alias in node.names]
+    elif isinstance(node, ast.ImportFrom):
+        base = _resolve(node, module, is_package)
+        targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+    else:
+        return []
+    found = []
+    for target in targets:
+        # ``import jaxrot.x.y`` imports the deepest of its prefixes that is a module here.
+        while target and target not in modules:
+            target = target.rpartition(".")[0]
+        if target:
+            found.append(target)
+    return found
+
+
 def import_graph(root: pathlib.Path, package: str) -> dict[str, set[str]]:
     """Module → the modules of the same package it imports, at any depth of its source.
 
@@ -51,22 +76,13 @@ def import_graph(root: pathlib.Path, package: str) -> dict[str, set[str]]:
     graph = {}
     for name, path in modules.items():
         tree = ast.parse(path.read_text(), filename=str(path))
-        edges = set()
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Import):
-                targets = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                base = _resolve(node, name, path.name == "__init__.py")
-                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
-            else:
-                continue
-            for target in targets:
-                # ``import jaxrot.x.y`` imports the deepest of its prefixes that is a module here.
-                while target and target not in modules:
-                    target = target.rpartition(".")[0]
-                if target and target != name:
-                    edges.add(target)
-        graph[name] = edges
+        is_package = path.name == "__init__.py"
+        graph[name] = {
+            target
+            for node in ast.walk(tree)
+            for target in _import_targets(node, name, is_package, modules)
+            if target != name
+        }
     return graph
 
 
@@ -153,3 +169,121 @@ def test_importing_jaxrot_starts_no_jax_backend():
     )
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
+
+
+# The rooms from the ground up. A room imports only from the floors below its own (never from its
+# floor, nor above): the ground floor imports nothing of jaxrot; the package's face and the command
+# line, on top, may import anything. A new room must be placed here.
+FLOORS = [
+    ["_core"],  # NaN-safe helpers, compile settings, the generic value checks
+    ["quaternion"],  # the rotation
+    ["_state", "_inertia"],  # a body: its state, its inertia (and the inertia's checks)
+    ["_particles", "_validation"],  # many bodies; the checks of a run
+    ["torques", "_free_body", "_fluid", "diagnostics"],  # what turns a body, the medium, measures
+    ["schemes", "analytic", "scenes"],  # one step; exact motions; problems
+    ["_integrate", "_fit"],  # the loops; fitting a body
+    ["_diffrax", "stability"],  # the diffrax face and reference; step-size limits
+    ["comparison"],  # all measurement
+    ["__init__", "__main__"],  # the package's face, the command line
+]
+
+
+def room_of(module: str, package: str) -> str:
+    """The room of a dotted module name: its first part under ``package`` (``__init__`` for the package)."""
+    parts = module.split(".")
+    assert parts[0] == package, module
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def upward_imports(graph: dict[str, set[str]], floors: list[list[str]], package: str) -> list[str]:
+    """``"a -> b"`` for each import from a module ``a`` to a module ``b`` of another room on the same or
+    a higher floor (``floors`` lists the rooms from the ground up)."""
+    floor = {room: level for level, rooms in enumerate(floors) for room in rooms}
+    found = []
+    for module, targets in sorted(graph.items()):
+        room = room_of(module, package)
+        for target in sorted(targets):
+            other = room_of(target, package)
+            if other != room and floor[other] >= floor[room]:
+                found.append(f"{module} -> {target}")
+    return found
+
+
+def test_every_room_is_on_one_floor():
+    rooms = {room_of(name, "jaxrot") for name in module_names(PACKAGE_DIR, "jaxrot")}
+    placed = [room for rooms_ in FLOORS for room in rooms_]
+    assert len(placed) == len(set(placed)), "a room is on two floors"
+    assert rooms - set(placed) == set(), "place the new room(s) on a floor of FLOORS"
+    assert set(placed) - rooms == set(), "FLOORS names a room that is gone"
+
+
+def test_no_import_runs_up_the_floors():
+    graph = import_graph(PACKAGE_DIR, "jaxrot")
+    # The graph was read: the rollout's core imports the schemes, a floor below.
+    assert "jaxrot.schemes" in graph["jaxrot._integrate._run"]
+    assert upward_imports(graph, FLOORS, "jaxrot") == []
+
+
+def test_upward_imports_sees_imports_up_and_across(tmp_path):
+    files = {
+        "__init__.py": "from . import top\n",
+        "low.py": "def f():\n    from .sub import c\n",  # up, inside a function
+        "mid.py": "from . import low\nfrom .side import x\n",  # down (fine), across (not)
+        "side.py": "x = 1\n",
+        "sub/__init__.py": "",
+        "sub/c.py": "from .. import mid\n",
+        "top.py": "import pkg.sub.c\n",
+    }
+    for name, text in files.items():
+        path = tmp_path / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    floors = [["low"], ["mid", "side"], ["sub"], ["top"], ["__init__"]]
+    assert upward_imports(import_graph(tmp_path, "pkg"), floors, "pkg") == [
+        "pkg.low -> pkg.sub.c",
+        "pkg.mid -> pkg.side",
+    ]
+
+
+def test_the_top_level_holds_at_most_12_files():
+    files = sorted(path.name for path in PACKAGE_DIR.glob("*.py"))
+    assert len(files) <= 12, f"{len(files)} files directly under jaxrot/: {files}; give a concept a room"
+
+
+def test_no_module_is_over_400_lines():
+    long = {
+        str(path.relative_to(PACKAGE_DIR.parent)): n
+        for path in PACKAGE_DIR.rglob("*.py")
+        if (n := len(path.read_text().splitlines())) > 400
+    }
+    assert long == {}, "split these modules by concept"
+
+
+def test_no_jaxrot_import_inside_a_function():
+    """Imports at the top of a module say what it depends on; one inside a function hides a cycle or a
+    misplaced concept. The command line (``__main__.py``) may import late, to start fast."""
+    modules = module_names(PACKAGE_DIR, "jaxrot")
+    late = []
+    for name, path in modules.items():
+        if path.name == "__main__.py":
+            continue
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for function in ast.walk(tree):
+            if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                for node in ast.walk(function):
+                    if _import_targets(node, name, path.name == "__init__.py", modules):
+                        late.append(f"{path.relative_to(PACKAGE_DIR.parent)}:{node.lineno}")
+    assert late == []
+
+
+def test_all_lists_every_public_name():
+    """`jaxrot.__all__` is every public name bound in the package but its submodules (and other modules):
+    a name added to jaxrot/__init__.py without being listed fails here, and so does a listed name gone."""
+    public = {
+        name
+        for name, value in vars(jaxrot).items()
+        if not name.startswith("_") and not isinstance(value, types.ModuleType)
+    }
+    assert len(jaxrot.__all__) == len(set(jaxrot.__all__)), "a name is listed twice"
+    assert set(jaxrot.__all__) == public
+    assert list(jaxrot.__all__) == sorted(jaxrot.__all__)

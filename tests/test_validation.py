@@ -8,7 +8,7 @@ from helpers import MOMENTS, contract_params, principal_state
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot._validation import triangle_tolerance
+from jaxrot._inertia import triangle_tolerance
 
 
 GOOD = principal_state()

@@ -7,12 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._core._checks import check_values, is_concrete
 from .._inertia import body_inertia
 from .._integrate._runtime_check import IntegrationError, nonfinite_message
 from .._integrate._sharding import particle_sharded
 from .._particles import PARTICLES, flatten_particles, split_per_body, unflatten_trajectory
 from .._state import RotState, Trajectory
-from .._validation import check_bodies, check_times, check_torque, check_values, is_concrete
+from .._validation import check_bodies, check_times, check_torque
 from ..schemes._base import body_torque
 
 

@@ -9,10 +9,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
-from .._inertia import body_inertia
+from .._inertia import body_inertia, check_inertia
 from .._particles import PARTICLES, split_per_body, unwrap_per_body
 from .._state import RotState
-from .._validation import check_inertia, check_torque
+from .._validation import check_torque
 from ..schemes._base import body_torque
 
 

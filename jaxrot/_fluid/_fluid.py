@@ -7,8 +7,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core._checks import declared_dtype, is_concrete
 from .._particles import PerBody, is_per_body, per_body
-from .._validation import declared_dtype, is_concrete
 from ._flow import fluid_torque, overdamped_velocity
 from ._perrin import bretherton_factor, spheroid_friction
 

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._validation import float_dtype
+from .._core._checks import float_dtype
 
 
 __all__ = ["ellipj", "ellipk", "ellipkinc", "ellippi", "elliprf", "elliprj"]

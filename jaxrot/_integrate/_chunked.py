@@ -22,9 +22,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core._concrete import is_concrete
 from .._particles import unflatten_trajectory
 from .._state import RotState, Trajectory
-from .._validation import check_count, is_concrete
+from .._validation import check_count
 from ._run import Run, prepare_run
 
 

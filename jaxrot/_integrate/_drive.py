@@ -6,8 +6,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core._concrete import is_concrete
 from .._state import RotState
-from .._validation import is_concrete
 
 
 class Drive(NamedTuple):

@@ -7,19 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._core._checks import QUATERNION_NORM_TOL, declared_dtype, float_dtype, is_concrete
 from .._core._compile import filter_jit
 from .._fluid._flow import flow_rotation
 from .._fluid._fluid import check_fluid
 from .._particles import PARTICLES, split_per_body, unflatten_trajectory
 from .._state import Trajectory
-from .._validation import (
-    QUATERNION_NORM_TOL,
-    check_run_times,
-    check_torque,
-    declared_dtype,
-    float_dtype,
-    is_concrete,
-)
+from .._validation import check_run_times, check_torque
 from ..schemes._base import world_torque
 from ..schemes._rkn_splitting import uses_omega
 from ._bind import OVERDAMPED, bind_brownian, for_concrete_steps, scheme_for_call

@@ -15,10 +15,11 @@ import jax
 import jax.numpy as jnp
 
 from .._core._compile import filter_jit
+from .._core._concrete import is_concrete
 from .._inertia import body_inertia
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState, Trajectory
-from .._validation import check_bodies, check_run_times, check_torque, is_concrete
+from .._validation import check_bodies, check_run_times, check_torque
 from . import _blocking
 from ._bind import INERTIAL, bind_fluid, scheme_for_call
 from ._drive import check_drive, driven_step, driven_torque

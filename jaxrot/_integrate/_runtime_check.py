@@ -25,8 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core._checks import QUATERNION_NORM_TOL
 from .._core._limits import LIMITS
-from .._validation import QUATERNION_NORM_TOL
 
 
 NORM_TOL = QUATERNION_NORM_TOL

@@ -23,8 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import quaternion as quat
+from .._core._concrete import is_concrete
 from .._core._fusion import stage
-from .._validation import is_concrete
 from ._heat_kernel import SMALL_STEP, heat_kernel_rotation
 from ._noise import step_normals
 

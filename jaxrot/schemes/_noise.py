@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validation import is_concrete
+from .._core._concrete import is_concrete
 
 
 def check_key(key):

@@ -12,7 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._validation import check_inertia_values, check_int, check_torque
+from ..._inertia import check_inertia_values
+from ..._validation import check_int, check_torque
 from ...schemes import resolve_scheme
 from ._experiment import KINDS, Experiment
 from ._sensors import check_sensors

@@ -3,7 +3,7 @@
 import jax
 import numpy as np
 
-from ..._validation import QUATERNION_NORM_TOL, is_concrete
+from ..._core._checks import QUATERNION_NORM_TOL, is_concrete
 
 
 # The observation kinds: (attribute, its noise attribute, residual components, informative ones).
