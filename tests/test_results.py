@@ -146,3 +146,19 @@ def test_readme_quotes_the_results_files():
     readme = (DOCS.parent / "README.md").read_text()
     assert expected in readme, f"README.md's speed paragraph should read:\n\n{expected}\n"
     assert "{{ front_door_speed }}" in (DOCS / "index.md").read_text()
+
+
+def test_scheme_guide_table_is_the_registry():
+    """The scheme guide opens with the table of models (``{{ scheme_models_table }}``), rendered from
+    `jaxrot.schemes_for`: one row per model, every registered scheme linked to its page."""
+    from jaxrot._integrate._bind import DEFAULT_BROWNIAN, DEFAULT_OVERDAMPED
+    from jaxrot.schemes import MODELS, REGISTRY
+
+    table = _tables().TABLES["scheme_models_table"](DOCS)
+    assert "{{ scheme_models_table }}" in (DOCS / "schemes" / "index.md").read_text()
+    assert len(table.splitlines()) == 2 + len(MODELS)
+    for name in REGISTRY:
+        assert f"[`{name}`]({name}.md)" in table
+    overdamped, brownian = table.splitlines()[-2:]
+    assert overdamped.endswith(f"[`{DEFAULT_OVERDAMPED}`]({DEFAULT_OVERDAMPED}.md) |")
+    assert brownian.endswith(f"[`{DEFAULT_BROWNIAN}`]({DEFAULT_BROWNIAN}.md) |")

@@ -3,9 +3,10 @@
 A page writes ``{{ name }}`` of a table in `TABLES` on a line of its own; the hook replaces it
 with a Markdown table built from the results files under docs/ (``throughput_cpu.json``,
 ``race_cpu/``, ``fluid_race_cpu.json``, the GPU results under ``docs/gpu_h100/`` and
-``docs/gpu_h200/`` …), so the pages show exactly what the benchmarks wrote. The tables live beside
-this file, one module per page or topic (``_tables_*.py``); mkdocs loads a hook by its path, so
-their folder goes on ``sys.path`` first.
+``docs/gpu_h200/`` …), so the pages show exactly what the benchmarks wrote; the scheme guide's
+table of models is built from the package's own registry (``_tables_schemes.py``). The tables live
+beside this file, one module per page or topic (``_tables_*.py``); mkdocs loads a hook by its path,
+so their folder goes on ``sys.path`` first.
 """
 
 import sys
@@ -65,6 +66,7 @@ from _tables_race import (  # noqa: E402
     race_table_float32,
     race_table_float64,
 )
+from _tables_schemes import scheme_models_table  # noqa: E402
 from _tables_thermal import (  # noqa: E402
     thermal_jax_md_diagnosis,
     thermal_orders_table,
@@ -76,6 +78,7 @@ from _tables_thermal import (  # noqa: E402
 __all__ = ["TABLES", "on_page_markdown", "race_ratios"]
 
 TABLES = {
+    "scheme_models_table": scheme_models_table,
     "fluid_orders_table": fluid_orders_table,
     "fluid_race_figure": fluid_race_figure,
     "fluid_race_table": fluid_race_table,

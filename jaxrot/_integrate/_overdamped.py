@@ -45,6 +45,11 @@ def overdamped_rollout(
     alone. Jeffery's orbits (``torque=None``) come out of it; `jaxrot.rollout` with a fluid tends to
     it as the Stokes number ``I γ̇/ζ`` falls, with an error of order the Stokes number.
 
+    Two models (`jaxrot.schemes_for`): ``"overdamped"`` at ``kT = 0`` (`jaxrot.OVERDAMPED_SCHEMES`)
+    and ``"brownian"`` at ``kT > 0`` with a PRNG ``key`` (`jaxrot.BROWNIAN_SCHEMES`: the orientation
+    also diffuses, ``D_k = kT/ζ_k`` about the body axes). The call decides the model once, before
+    anything compiles, and refuses a scheme that does not integrate it.
+
     Args:
         q: unit quaternions ``(..., 4)``, scalar first, body → world; leading axes are bodies.
         fluid: a `jaxrot.Fluid` (fields shared or one per body).
@@ -55,11 +60,16 @@ def overdamped_rollout(
             (``ValueError``), as the balance would be an implicit equation; fold a linear drag into
             ``fluid.friction`` instead.
         args: the torque's parameters (`jaxrot.per_body` leaves: one per body).
-        scheme: None (``"rkmk4"``, order 4), ``"lie_euler"`` (1), ``"lie_midpoint"`` (2), or a scheme
-            instance, e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")`` (half the
-            operations a step, not exact at a constant angular velocity).
+        scheme: a name of `jaxrot.schemes_for` of the call's model, or a scheme instance. At
+            ``kT = 0``: ``"rkmk4"`` (order 4; the default without a ``key``), ``"lie_euler"`` (1),
+            ``"lie_midpoint"`` (2), e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")``
+            (half the operations a step, not exact at a constant angular velocity); a Brownian
+            scheme also runs there, without noise. At ``kT > 0`` with a ``key``:
+            ``"brownian_splitting"`` (weak order 2; the default with a ``key``) or
+            ``"brownian_euler"`` (weak order 1).
         save_every: save every ``save_every`` steps (it must divide ``n_steps``); t0: initial time.
-        key: a JAX PRNG key, required when ``fluid.kT > 0`` (thermal rotation); unused otherwise.
+        key: a JAX PRNG key, required when ``fluid.kT > 0`` (Brownian rotation; the same key gives
+            the same run); unused otherwise, except that it makes ``"brownian_splitting"`` the default.
 
     Returns:
         `jaxrot.Trajectory`: ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)`` and ``omega``
@@ -67,8 +77,10 @@ def overdamped_rollout(
 
     Raises:
         ValueError: a wrong shape, a non-unit or non-finite ``q``, ``dt <= 0``, ``n_steps < 0``, a
-            ``save_every`` that does not divide ``n_steps``, an unknown scheme, a bad fluid, a torque
-            that depends on ``omega``, or ``kT > 0`` without a ``key``; before anything compiles.
+            ``save_every`` that does not divide ``n_steps``, an unknown scheme, a scheme that does not
+            integrate the call's model (the message names the schemes that do), a bad fluid, a torque
+            that depends on ``omega``, ``kT > 0`` without a ``key``, or a ``kT`` traced (under
+            ``jit``) without a ``key`` (at trace time); before anything compiles.
         jaxrot.IntegrationError: (eager) a saved state holds a NaN or an infinity.
 
     Example:

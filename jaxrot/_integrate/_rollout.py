@@ -35,8 +35,18 @@ def rollout(
 ):
     """Integrate rigid-body rotation with a fixed step and return the saved states.
 
+    One call, three models (`jaxrot.schemes_for`): a body in vacuum (``"vacuum"``, without
+    ``fluid``), in a fluid (``"fluid"``, ``fluid=jaxrot.Fluid(friction)`` at ``kT = 0``) and in a
+    fluid at a temperature (``"thermal"``, ``kT > 0`` and a PRNG ``key``). The call decides the
+    model once, before anything compiles, and refuses a scheme that does not integrate it. A body
+    without inertia: `jaxrot.overdamped_rollout`.
+
     Args:
-        scheme: a name in `jaxrot.SCHEMES` (``"zhao"``, …) or a scheme object.
+        scheme: a name of `jaxrot.schemes_for` of the call's model, or a scheme instance: without
+            ``fluid`` one of `jaxrot.SCHEMES` (``"zhao"``, …); with ``fluid`` one of
+            `jaxrot.FLUID_SCHEMES` at ``kT = 0`` (``"exp_midpoint"``, ``"exp_rk4"``) and of
+            `jaxrot.THERMAL_SCHEMES` at ``kT > 0`` with a ``key`` (``"baoab"``, ``"exp_euler"``); a
+            thermal scheme also runs at a concrete ``kT = 0``, without noise.
         state: `RotState` with ``q`` ``(..., 4)`` (unit, scalar first, body →
             world) and ``omega`` ``(..., 3)`` (world frame). Leading axes are
             particles; they are vmapped.
@@ -80,13 +90,16 @@ def rollout(
             result is bit for bit that of one call; chunks of one size compile
             once. To save and resume a long run, use `jaxrot.rollout_chunks`.
         fluid: a `jaxrot.Fluid` the bodies turn in, or None: its torque
-            (friction, the flow's rotation and strain) is added to ``torque``. Its
-            friction is integrated exactly, so no step is limited by ``I/ζ``: only the
-            schemes of `jaxrot.schemes.FLUID_SCHEMES` (``"exp_midpoint"``, order 2;
-            ``"exp_rk4"``, order 4) take it; the others raise ``ValueError``. The
+            (friction, the flow's rotation and strain, and at ``kT > 0`` the thermal
+            torque that balances the friction) is added to ``torque``. Its friction is
+            integrated exactly, so no step is limited by ``I/ζ``: at ``kT = 0`` the
+            schemes of `jaxrot.FLUID_SCHEMES` (``"exp_midpoint"``, order 2;
+            ``"exp_rk4"``, order 4) or of `jaxrot.THERMAL_SCHEMES` take it, at
+            ``kT > 0`` those of `jaxrot.THERMAL_SCHEMES` (``"baoab"``, weak order 2;
+            ``"exp_euler"``, weak order 1); the others raise ``ValueError``. The
             inertia must be principal moments ``(..., 3)`` about the friction's axes.
-        key: a JAX PRNG key for a fluid with ``kT > 0`` (required there; the same
-            key gives the same run); unused otherwise.
+        key: a JAX PRNG key, required for a fluid with ``kT > 0`` (the same key
+            gives the same run); unused otherwise.
 
     Returns:
         `Trajectory` with ``t`` ``(n_saved,)``, ``q`` ``(n_saved, ..., 4)``,
@@ -108,10 +121,14 @@ def rollout(
             by jax in ``jax.errors.JaxRuntimeError``.
         ValueError: for a wrong shape, non-finite values, a non-unit ``q``, a
             non-physical inertia, ``dt <= 0``, ``n_steps < 0``, a ``save_every``
-            that does not divide ``n_steps``, an unknown scheme, a ``chunk_steps``
-            that is not a positive multiple of ``save_every``, or a dtype other
-            than float32/float64 (or ``state.q`` and ``state.omega`` of different
-            dtypes), before anything compiles. Value checks are skipped for
+            that does not divide ``n_steps``, an unknown scheme, a scheme that does
+            not integrate the call's model (the message names the schemes that do),
+            ``kT > 0`` without a ``key``, a ``kT`` traced (under ``jit``) without a
+            ``key`` (at trace time: whether it is 0 is not known before the program
+            runs), a full inertia tensor or a ``drive`` with ``fluid``, a
+            ``chunk_steps`` that is not a positive multiple of ``save_every``, or a
+            dtype other than float32/float64 (or ``state.q`` and ``state.omega`` of
+            different dtypes), before anything compiles. Value checks are skipped for
             traced inputs.
 
     Example:

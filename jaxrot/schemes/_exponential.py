@@ -167,9 +167,10 @@ class FluidArgs(NamedTuple):
 class AbstractExponentialLieRK(AbstractScheme):
     """An exponential Lie-group Runge–Kutta scheme given by an `ExponentialTableau` (see the module).
 
-    Without a fluid it is the tableau's classical method on ``(q, ω_b)`` (carry: `RotState`). Made
-    for `jaxrot.rollout`'s ``fluid=``: `in_fluid` gives the same scheme reading ``args`` as a
-    `FluidArgs` and carrying a `FluidCarry`. Any torque: one that does not depend on ω (read from its
+    Without a fluid it is the tableau's classical method on ``(q, ω_b)`` (carry: `RotState`); the
+    registered schemes declare the ``"fluid"`` model alone, so `jaxrot.rollout` runs them only with
+    ``fluid=``, where `in_fluid` gives the same scheme reading ``args`` as a `FluidArgs` and
+    carrying a `FluidCarry`. Any torque: one that does not depend on ω (read from its
     jaxpr, `jaxrot.schemes._rkn_splitting.uses_omega`) is folded into the slow velocity, where a
     stiff one costs no order; one that does is integrated as a force (``N``), fourth order only
     while ``I⁻¹ ∂τ/∂ω`` is not stiff.

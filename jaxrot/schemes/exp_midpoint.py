@@ -15,11 +15,12 @@ _MIDPOINT = ExponentialTableau(
 
 
 class ExpMidpoint(AbstractExponentialLieRK):
-    """Exponential midpoint rule: order 2 with or without a fluid, two torque calls per step.
+    """Exponential midpoint rule: order 2 at any ζΔt/I, two torque calls per step.
 
-    The cheap fluid scheme (see `jaxrot.schemes.AbstractExponentialLieRK` and the module
-    `jaxrot.schemes._exponential`): the friction's relaxation ``e^{−ζΔt/I}`` is exact, so no step is
-    limited by ``I/ζ``; as ``ζΔt/I → ∞`` it becomes the Lie midpoint rule of the overdamped model.
+    The cheap fluid scheme (the ``"fluid"`` model: `jaxrot.rollout` with ``fluid=`` at ``kT = 0``;
+    see `jaxrot.schemes.AbstractExponentialLieRK` and the module `jaxrot.schemes._exponential`):
+    the friction's relaxation ``e^{−ζΔt/I}`` is exact, so no step is limited by ``I/ζ``; as
+    ``ζΔt/I → ∞`` it becomes the Lie midpoint rule of the overdamped model.
 
     Reference: M. Hochbruck and A. Ostermann, "Explicit exponential Runge–Kutta methods for
     semilinear parabolic problems", SIAM J. Numer. Anal. 43, 1069–1090 (2005), section 5.1.

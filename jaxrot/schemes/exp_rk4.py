@@ -33,7 +33,8 @@ _HOCHBRUCK_OSTERMANN = ExponentialTableau(
 class ExpRK4(AbstractExponentialLieRK):
     """Hochbruck–Ostermann exponential Runge–Kutta: order 4 at any ζΔt/I, five torque calls per step.
 
-    The high-order fluid scheme (see `jaxrot.schemes.AbstractExponentialLieRK`): five stages that
+    The high-order fluid scheme (the ``"fluid"`` model: `jaxrot.rollout` with ``fluid=`` at
+    ``kT = 0``; see `jaxrot.schemes.AbstractExponentialLieRK`): five stages that
     satisfy the stiff order conditions of order 4, lifted to the rotation group in
     Runge–Kutta–Munthe-Kaas coordinates. As ``ζΔt/I → ∞`` it becomes a fourth-order RKMK method of
     the overdamped model; without a fluid, a five-stage classical method of order 4.
