@@ -94,5 +94,6 @@ __all__ = [
     "rollout",
     "rollout_chunks",
     "save_checkpoint",
+    "schemes_for",
     "solver",
 ]

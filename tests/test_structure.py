@@ -181,8 +181,8 @@ FLOORS = [
     ["_particles", "_validation"],  # many bodies; the checks of a run
     ["torques", "_free_body", "_fluid", "diagnostics"],  # what turns a body, the medium, measures
     ["schemes", "analytic", "scenes"],  # one step; exact motions; problems
-    ["_integrate", "_fit"],  # the loops; fitting a body
-    ["_diffrax", "stability"],  # the diffrax face and reference; step-size limits
+    ["_integrate"],  # every loop, and the binder that decides which scheme fits which call
+    ["_diffrax", "stability", "_fit"],  # the diffrax face and reference; step-size limits; fitting
     ["comparison"],  # all measurement
     ["__init__", "__main__"],  # the package's face, the command line
 ]

@@ -12,6 +12,8 @@ Example:
     ...                           solvers=["diffrax_tsit5"], tolerances=(1e-6,), repeats=1, progress=False)
     >>> [(r["method"], r["n_steps"]) for r in rows]
     [('zhao', 10), ('zhao', 20), ('diffrax_tsit5', 9)]
+    >>> print(comparison.format_recommendation(rows))  # doctest: +ELLIPSIS
+    fastest within error budget [rad] ...
 """
 
 from ._ladder import (

@@ -25,6 +25,7 @@ from .._core._compile import compiler_options
 from .._diffrax._reference import adaptive_solve
 from .._fluid._fluid import check_fluid
 from .._inertia import body_inertia
+from .._integrate._ladder import saved_steps
 from .._integrate._overdamped import velocity_field
 from .._particles import PARTICLES
 from .._state import RotState, Trajectory
@@ -64,15 +65,8 @@ def inertial_runner(scheme, scene, n_bodies):
     def run(state, dt, n, saves):
         def one(q, omega):
             carry = scheme.init(RotState(q, omega), jnp.zeros((), q.dtype), inertia, scene.torque, args)
-
-            def interval(carry, k):
-                def step(i, c):
-                    return scheme.step(c, (k * n + i).astype(dt.dtype) * dt, dt, inertia, scene.torque, args)
-
-                carry = jax.lax.fori_loop(0, n, step, carry)
-                return carry, scheme.state(carry)
-
-            return jax.lax.scan(interval, carry, jnp.arange(saves))[1]
+            step = lambda c, t: scheme.step(c, t, dt, inertia, scene.torque, args)  # noqa: E731
+            return saved_steps(carry, step, scheme.state, dt, n, saves)
 
         return jax.vmap(one, axis_name=PARTICLES, out_axes=1)(state.q, state.omega)
 
@@ -87,15 +81,8 @@ def overdamped_runner(scheme, scene, n_bodies):
     def run(state, dt, n, saves):
         def one(q):
             carry = scheme.init(q, jnp.zeros((), q.dtype), velocity)
-
-            def interval(carry, k):
-                def step(i, c):
-                    return scheme.step(c, (k * n + i).astype(dt.dtype) * dt, dt, velocity)
-
-                carry = jax.lax.fori_loop(0, n, step, carry)
-                return carry, carry
-
-            return jax.lax.scan(interval, carry, jnp.arange(saves))[1]
+            step = lambda c, t: scheme.step(c, t, dt, velocity)  # noqa: E731
+            return saved_steps(carry, step, lambda c: c, dt, n, saves)
 
         return jax.vmap(one, axis_name=PARTICLES, out_axes=1)(state.q)
 

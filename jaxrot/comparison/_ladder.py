@@ -1,14 +1,6 @@
 """The speed/accuracy comparison behind ``python -m jaxrot compare``.
 
-Example:
-    >>> import jax; jax.config.update("jax_enable_x64", True)
-    >>> from jaxrot import comparison
-    >>> rows = comparison.compare(t_end=0.5, particles=2, coarse_steps=10, levels=2, schemes=["zhao"],
-    ...                           solvers=["diffrax_tsit5"], tolerances=(1e-6,), repeats=1, progress=False)
-    >>> [(r["method"], r["n_steps"]) for r in rows]
-    [('zhao', 10), ('zhao', 20), ('diffrax_tsit5', 9)]
-    >>> print(comparison.format_recommendation(rows))  # doctest: +ELLIPSIS
-    fastest within error budget [rad] ...
+The example is on the package's face (`jaxrot.comparison`).
 
 Every scheme in `SCHEMES` runs on one scene at a ladder of time steps, and the
 generic alternative (diffrax Tsit5 and Dopri8 with adaptive steps) at a ladder
@@ -30,6 +22,7 @@ from .. import quaternion as quat
 from .._core._compile import compiler_options
 from .._diffrax._reference import adaptive_solve, reference_rollout
 from .._inertia import body_inertia
+from .._integrate._ladder import saved_steps
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState
 from .._validation import check_bodies
@@ -292,16 +285,15 @@ def _fixed_runner(problem: _Problem, scheme):
             axis_name=PARTICLES,
         )
 
-        def save(carry, k):
-            def one_step(j, c):
-                # t from the step index, as in `jaxrot.rollout`.
-                return step(c, (k * factor + j).astype(dt.dtype) * dt, inertia, p.flat_args)
-
-            carry = jax.lax.fori_loop(0, factor, one_step, carry)
-            return carry, jax.vmap(scheme.state)(carry)
-
         carry = init(flat, inertia, p.flat_args)
-        _, saved = jax.lax.scan(save, carry, jnp.arange(p.coarse_steps, dtype=jnp.int32))
+        saved = saved_steps(
+            carry,
+            lambda c, t: step(c, t, inertia, p.flat_args),
+            jax.vmap(scheme.state),
+            dt,
+            factor,
+            p.coarse_steps,
+        )
         q = jnp.concatenate([flat.q[None], saved.q]).reshape(-1, *state.q.shape)
         omega = jnp.concatenate([flat.omega[None], saved.omega]).reshape(-1, *state.omega.shape)
         return RotState(q, omega)

@@ -63,14 +63,26 @@ SCENES = MappingProxyType(
     }
 )
 
+# Strings only (griffe reads them statically); the check below keeps them complete.
 __all__ = [
     "FLUID_SCENES",
     "SCENES",
-    "THERMAL_SCENES",
     "Scene",
+    "THERMAL_SCENES",
+    "dipole_cloud",
+    "dipole_field",
+    "dipole_rotating_field",
+    "free_top",
     "gravity_torque",
+    "heavy_top",
+    "lagrange_top",
+    "magnetic_nanoparticles",
+    "magnetic_nanoparticles_inertial",
     "per_body",
-    *SCENES,
-    *FLUID_SCENES,
-    *THERMAL_SCENES,
+    "spheroid_shear",
+    "spheroid_shear_overdamped",
+    "tumbling_cloud",
+    "viscous_drag",
 ]
+if not {*SCENES, *FLUID_SCENES, *THERMAL_SCENES} <= set(__all__):  # a new scene must be listed above
+    raise ImportError("jaxrot.scenes.__all__ misses a scene of SCENES, FLUID_SCENES or THERMAL_SCENES")

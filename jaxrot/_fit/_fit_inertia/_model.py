@@ -12,8 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._integrate._bind import INERTIAL, scheme_for_call
 from ..._validation import check_int, check_observed, check_torque
-from ...schemes import resolve_scheme
 from .._initial import estimate_omega
 
 
@@ -78,7 +78,7 @@ def build_model(
     normalize=False,
 ):
     """The `Model` (validated, padded data and the static configuration) and the `Settings`."""
-    scheme = resolve_scheme(scheme)
+    scheme, _ = scheme_for_call(scheme, INERTIAL)  # a body in vacuum: the model fit_inertia fits
     check_torque(torque)
     t, q, omega, dtype = check_observed(observed, normalize)
     n = t.shape[0]

@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._inertia import check_inertia_values
+from ..._integrate._bind import INERTIAL, scheme_for_call
 from ..._validation import check_int, check_torque
-from ...schemes import resolve_scheme
 from ._experiment import KINDS, Experiment
 from ._sensors import check_sensors
 
@@ -173,7 +173,7 @@ def check_arguments(
     experiments = tuple(experiments)
     k = len(experiments)
     check_torque(torque)
-    scheme_obj = resolve_scheme(scheme)
+    scheme_obj, _ = scheme_for_call(scheme, INERTIAL)  # a body in vacuum: the model identify fits
     max_iter = check_int(max_iter, "max_iter", 1)
     if free_inertia not in (True, False, "moments"):
         raise ValueError(
