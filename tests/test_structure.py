@@ -219,8 +219,8 @@ def test_every_room_is_on_one_floor():
 
 def test_no_import_runs_up_the_floors():
     graph = import_graph(PACKAGE_DIR, "jaxrot")
-    # The graph was read: the rollout's core imports the schemes, a floor below.
-    assert "jaxrot.schemes" in graph["jaxrot._integrate._run"]
+    # The graph was read: the binder of the loops imports the schemes, a floor below.
+    assert "jaxrot.schemes" in graph["jaxrot._integrate._bind"]
     assert upward_imports(graph, FLOORS, "jaxrot") == []
 
 
