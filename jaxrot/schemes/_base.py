@@ -53,7 +53,8 @@ class AbstractScheme(eqx.Module):
             without ``fluid``), ``"fluid"`` (with a `jaxrot.Fluid` at ``kT = 0``), ``"thermal"``
             (at ``kT > 0``, with a key), ``"overdamped"`` and ``"brownian"``
             (`jaxrot.overdamped_rollout` at ``kT = 0`` and ``kT > 0``): what `jaxrot.rollout`'s
-            binder checks once, as diffrax checks a solver's ``term_structure``.
+            binder checks once, as diffrax checks a solver's ``term_structure``;
+            ``{"vacuum"}`` unless a scheme declares more.
         torque_evals_per_step: calls of the torque callable per step (0 when
             ``torque=None``).
         torque_evals_at_init: extra calls made once by `init` (schemes that
@@ -65,7 +66,7 @@ class AbstractScheme(eqx.Module):
 
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
-    models: eqx.AbstractClassVar[frozenset[str]]
+    models: ClassVar[frozenset[str]] = frozenset({"vacuum"})  # a new inertial scheme: vacuum by default
     torque_evals_per_step: eqx.AbstractClassVar[int]
     torque_evals_at_init: ClassVar[int] = 0
 

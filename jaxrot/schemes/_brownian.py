@@ -61,7 +61,7 @@ class AbstractBrownianScheme(eqx.Module):
     key_impl: str | None = eqx.field(default=None, static=True)
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
-    models: eqx.AbstractClassVar[frozenset[str]]
+    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
     normals_per_step: eqx.AbstractClassVar[int]
     velocity_evals_per_step: eqx.AbstractClassVar[int]
 

@@ -46,7 +46,7 @@ classical Runge–Kutta method on ``(q, ω_b)``.
 
 import dataclasses
 import math
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -182,6 +182,7 @@ class AbstractExponentialLieRK(AbstractScheme):
     chart: str = eqx.field(default="exp", static=True)
     fluid: bool = eqx.field(default=False, static=True)
     tableau: eqx.AbstractClassVar[ExponentialTableau]
+    models: ClassVar[frozenset[str]] = frozenset({"fluid"})
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

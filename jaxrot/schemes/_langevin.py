@@ -15,7 +15,7 @@ distribution: the Maxwell law ``u_k ~ N(0, kT/I_k)`` on each axis (equipartition
 
 import abc
 import dataclasses
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -64,6 +64,7 @@ class AbstractLangevinScheme(AbstractScheme):
 
     key_impl: str | None = eqx.field(default=None, static=True)
     normals_per_step: eqx.AbstractClassVar[int]
+    models: ClassVar[frozenset[str]] = frozenset({"thermal"})
 
     def bind(self, key_impl: str | None) -> "AbstractLangevinScheme":
         """This scheme for a rollout in a fluid whose noise comes from keys of ``key_impl``."""

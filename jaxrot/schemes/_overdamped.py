@@ -41,7 +41,7 @@ class AbstractOverdampedScheme(eqx.Module):
     chart: str = eqx.field(default="exp", static=True)
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
-    models: eqx.AbstractClassVar[frozenset[str]]
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped"})
     nodes: eqx.AbstractClassVar[tuple[float, ...]]
     rows: eqx.AbstractClassVar[tuple[tuple[float, ...], ...]]
     weights: eqx.AbstractClassVar[tuple[float, ...]]
