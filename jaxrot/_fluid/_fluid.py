@@ -45,7 +45,7 @@ class Fluid(eqx.Module):
         kT: the thermal energy (≥ 0); ``kT > 0`` adds the thermal torque that balances the
             friction and needs a PRNG ``key`` in the rollout. Scalar or per body. Whether it is 0
             is recorded when the fluid is built (the static field ``temperature``: ``"zero"``,
-            ``"positive"``, or ``"unknown"`` for a traced value), so a fluid built outside ``jit``
+            ``"positive"``, or ``"traced"`` for a traced value), so a fluid built outside ``jit``
             and passed in keeps its model; build a new `Fluid` to change ``kT``.
 
     The torque on a body at ``(q, ω)`` (world frame, `torque`) is
@@ -69,9 +69,9 @@ class Fluid(eqx.Module):
     velocity_gradient: jax.Array | PerBody | None
     bretherton: jax.Array | PerBody
     kT: jax.Array | PerBody
-    # Whether kT is 0, read where it was given (a Python number, or a concrete array): "zero",
-    # "positive" or "unknown" (built from a traced value). Static, so that a Fluid passed through
-    # `jax.jit` still tells the rollout at trace time which model it asks for (`jaxrot._integrate._bind`).
+    # Whether kT is 0, read where it was given (`temperature_of`): "zero", "positive" or "traced".
+    # Static, so that a Fluid passed through `jax.jit` still tells the rollout at trace time which
+    # model it asks for (`jaxrot._integrate._bind`).
     temperature: str = eqx.field(static=True)
 
     def __init__(self, friction, *, velocity_gradient=None, bretherton=0.0, kT=0.0):
@@ -81,7 +81,7 @@ class Fluid(eqx.Module):
         self.friction = array(friction)
         self.velocity_gradient = None if velocity_gradient is None else array(velocity_gradient)
         self.bretherton = array(bretherton)
-        self.temperature = _temperature(kT)
+        self.temperature = temperature_of(kT)
         self.kT = array(kT)
         _check_values(self)
 
@@ -137,10 +137,12 @@ class Fluid(eqx.Module):
         return overdamped_velocity(q, jax.tree_util.tree_map(_unwrap, self, is_leaf=is_per_body), torque)
 
 
-def _temperature(kT) -> str:
+def temperature_of(kT) -> str:
+    """``"zero"``, ``"positive"`` (some body's ``kT > 0``) or ``"traced"``: what a ``kT`` (or a
+    `jaxrot.per_body` of it) tells of itself here."""
     value = _unwrap(kT)
     if not is_concrete(value):
-        return "unknown"
+        return "traced"
     return "positive" if np.any(np.asarray(value, dtype=np.float64) > 0) else "zero"
 
 

@@ -21,11 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._core._concrete import is_concrete
-from .._fluid._fluid import Fluid, check_fluid
+from .._fluid._fluid import Fluid, check_fluid, temperature_of
 from .._inertia import is_diagonal_form
 from .._particles import unwrap_per_body
-from ..schemes import REGISTRY, SCHEME_TYPES, schemes_for
+from ..schemes import MODELS, resolve_scheme, schemes_for
 from ..schemes._brownian import BrownianStart, for_steps
 from ..schemes._exponential import FluidArgs
 from ..schemes._langevin import ThermalArgs
@@ -35,8 +34,7 @@ from ..schemes._noise import body_keys, check_key
 INERTIAL, OVERDAMPED = "jaxrot.rollout", "jaxrot.overdamped_rollout"
 # The models each entry point runs: (at kT = 0, at a temperature).
 _ENTRY_MODELS = {INERTIAL: ("fluid", "thermal"), OVERDAMPED: ("overdamped", "brownian")}
-_ENTRY_OF = {"vacuum": INERTIAL, "fluid": INERTIAL, "thermal": INERTIAL, "overdamped": OVERDAMPED,
-             "brownian": OVERDAMPED}  # fmt: skip
+_ENTRY_OF = {"vacuum": INERTIAL} | {model: entry for entry, pair in _ENTRY_MODELS.items() for model in pair}
 DEFAULT_OVERDAMPED, DEFAULT_BROWNIAN = "rkmk4", "brownian_splitting"
 
 _BODY = {
@@ -76,12 +74,10 @@ def candidates(model: str) -> str:
 
 
 def temperature(fluid) -> str:
-    """``"zero"``, ``"positive"`` (some body's ``kT > 0``) or ``"traced"``: from the concrete value, else
-    from what the fluid recorded where it was built (`jaxrot.Fluid`'s static ``temperature``)."""
-    kT = unwrap_per_body(fluid.kT)
-    if is_concrete(kT):
-        return "positive" if np.any(np.asarray(kT) > 0) else "zero"
-    return {"unknown": "traced"}.get(fluid.temperature, fluid.temperature)
+    """``"zero"``, ``"positive"`` or ``"traced"``: from ``fluid.kT`` where it is concrete, else from what
+    the fluid recorded where it was built (`jaxrot.Fluid`'s static ``temperature``)."""
+    now = temperature_of(fluid.kT)
+    return fluid.temperature if now == "traced" else now
 
 
 def call_models(entry: str, fluid, key) -> tuple[str, ...] | None:
@@ -109,10 +105,10 @@ def scheme_for_call(scheme, entry: str, fluid=None, key=None):
     models = call_models(entry, fluid, key)
     if scheme is None and entry == OVERDAMPED:
         scheme = DEFAULT_BROWNIAN if key is not None else DEFAULT_OVERDAMPED
-    if isinstance(scheme, str) and scheme in REGISTRY:
-        scheme = REGISTRY[scheme]
-    if not isinstance(scheme, SCHEME_TYPES):
-        raise ValueError(_unknown(scheme, entry, models, fluid))
+    try:
+        scheme = resolve_scheme(scheme)
+    except ValueError:  # the same refusal, with the schemes of this very call
+        raise ValueError(_unknown(scheme, entry, models, fluid)) from None
     if models is None:
         raise ValueError(_needs_key(scheme, entry, fluid))
     fitting = [model for model in models if model in scheme.models]
@@ -161,10 +157,10 @@ def _misfit(scheme, entry, model) -> str:
             f"scheme {name!r} has no thermal noise, and `fluid.kT` > 0 needs it: use {candidates(model)}; or "
             f"{'pass kT=0' if model == 'thermal' else 'pass kT=0 without a key'} for a deterministic run."
         )
-    described = " and ".join(_BODY[m] for m in scheme.models)
-    first = next(m for m in ("vacuum", "fluid", "thermal", "overdamped", "brownian") if m in scheme.models)
+    declared = [m for m in MODELS if m in scheme.models]  # in MODELS' order: the same words every run
     return (
-        f"scheme {name!r} integrates {described}: {_HOW[first]}. For this call ({_BODY[model]}), use "
+        f"scheme {name!r} integrates {' and '.join(_BODY[m] for m in declared)}: {_HOW[declared[0]]}. "
+        f"For this call ({_BODY[model]}), use "
         f"{candidates(model)}."
     )
 

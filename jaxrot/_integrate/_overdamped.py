@@ -18,6 +18,7 @@ from ..schemes._base import world_torque
 from ..schemes._rkn_splitting import uses_omega
 from ._bind import OVERDAMPED, bind_brownian, for_concrete_steps, scheme_for_call
 from ._runtime_check import IntegrationError, nonfinite_message
+from ._saved_steps import saved_steps
 
 
 def overdamped_rollout(
@@ -183,16 +184,10 @@ def _overdamped_flat(scheme, q, fluid, fluid_axes, dt, t0, torque, args, args_ax
         jax.vmap(step_one, in_axes=(0, None, fluid_axes, args_axes), axis_name=PARTICLES), prevent_cse=False
     )
 
-    def save_interval(carry, save_index):
-        def one_step(c, j):
-            t = t0 + (save_index * save_every + j).astype(dt.dtype) * dt
-            return step_all(c, t, fluid, args), None
-
-        carry, _ = jax.lax.scan(one_step, carry, jnp.arange(save_every))
-        return carry, carry
-
     carry = init_all(q, fluid, args)
-    _, saved = jax.lax.scan(save_interval, carry, jnp.arange(n_saves))
+    saved = saved_steps(
+        carry, lambda c, t: step_all(c, t, fluid, args), lambda c: c, dt, save_every, n_saves, t0
+    )
     t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
     return Trajectory(
         t, jnp.concatenate([carry.q[None], saved.q]), jnp.concatenate([carry.omega[None], saved.omega])

@@ -41,7 +41,6 @@ class Run:
     Built by keyword (`prepare_run`), as diffrax builds its loop's state."""
 
     scheme: Any  # the scheme's form for the call's model (`jaxrot._integrate._bind`)
-    model: str
     flat_state: RotState
     inertia: Any
     per_particle: bool
@@ -157,7 +156,6 @@ def prepare_run(
         n_blocks = 1
     return Run(
         scheme=scheme,
-        model=model,
         flat_state=flat_state,
         inertia=inertia,
         per_particle=per_particle,

@@ -25,8 +25,8 @@ from .._core._compile import compiler_options
 from .._diffrax._reference import adaptive_solve
 from .._fluid._fluid import check_fluid
 from .._inertia import body_inertia
-from .._integrate._ladder import saved_steps
 from .._integrate._overdamped import velocity_field
+from .._integrate._saved_steps import saved_steps
 from .._particles import PARTICLES
 from .._state import RotState, Trajectory
 from ..scenes import FLUID_SCENES

@@ -22,7 +22,7 @@ from .. import quaternion as quat
 from .._core._compile import compiler_options
 from .._diffrax._reference import adaptive_solve, reference_rollout
 from .._inertia import body_inertia
-from .._integrate._ladder import saved_steps
+from .._integrate._saved_steps import saved_steps
 from .._particles import PARTICLES, flatten_particles, split_per_body
 from .._state import RotState
 from .._validation import check_bodies

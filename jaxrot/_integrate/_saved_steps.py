@@ -1,9 +1,10 @@
-"""The fixed-step loop of a ladder of steps: ``dt`` and the steps between saves as runtime values.
+"""A fixed-step loop that saves every few steps: `jaxrot.overdamped_rollout`'s, and the comparison's.
 
-`jaxrot.rollout` compiles one program per step count (a `lax.scan` of static length); a ladder of
-time steps (`jaxrot.comparison`) runs one scheme at many ``(dt, steps)`` pairs, so its loop takes
-both as values and compiles once per scheme. The times come from the step index, as in
-`jaxrot.rollout` (``t = t0 + (k · steps + j) Δt``), so that late times keep full precision.
+``dt`` and the steps between saves may be runtime values: a ladder of time steps
+(`jaxrot.comparison`) runs one scheme at many ``(dt, steps)`` pairs and compiles once per scheme.
+The times come from the step index, as in `jaxrot.rollout` (``t = t0 + (k · steps + j) Δt``), so
+that late times keep full precision. (`jaxrot.rollout`'s own loop, `jaxrot._integrate._run`, adds
+chunks, cache blocking and the runtime check.)
 """
 
 import jax
@@ -18,7 +19,7 @@ def saved_steps(carry, step, read, dt, steps_per_save, n_saves, t0=None):
         carry: the scheme's carry at ``t0`` (any pytree; bodies vmapped inside ``step`` or outside).
         step: ``step(carry, t) -> carry``, one step of ``dt`` from time ``t``.
         read: what to save of a carry (a `RotState`, or the carry itself).
-        dt: the step (a traced scalar); steps_per_save: steps between saves (a traced integer);
+        dt: the step (a scalar array); steps_per_save: steps between saves (an int, or a traced one);
         n_saves: the number of saves (a Python int); t0: the start time, or None for 0.
     """
 
