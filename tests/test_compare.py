@@ -107,7 +107,7 @@ class _Registered(Euler):
 def test_a_newly_registered_scheme_gets_its_rows_with_no_other_change(monkeypatch):
     """By default every scheme in SCHEMES and every adaptive solver gets its rows."""
     registry = {"euler": jaxrot.SCHEMES["euler"], "registered_later": _Registered()}
-    monkeypatch.setattr(comparison, "SCHEMES", registry)
+    monkeypatch.setattr(comparison._ladder, "SCHEMES", registry)
     rows = compare(
         t_end=0.2, particles=1, coarse_steps=5, levels=2, tolerances=(1e-4,), repeats=1, progress=False
     )

@@ -34,8 +34,6 @@ _ROWS = {
         "BROWNIAN_SCHEMES",
     ),
 }
-# The models whose ``order`` is a weak order (ensemble averages).
-_WEAK = ("thermal", "brownian")
 
 
 def scheme_models_table(docs):
@@ -43,7 +41,7 @@ def scheme_models_table(docs):
     its page, with its order) and the default scheme of the call where it has one."""
     import jaxrot
     from jaxrot._integrate._bind import DEFAULT_BROWNIAN, DEFAULT_OVERDAMPED
-    from jaxrot.schemes import MODELS
+    from jaxrot.schemes import MODELS, THERMAL_MODELS
 
     if tuple(_ROWS) != tuple(MODELS):
         raise ValueError(f"_tables_schemes.py describes the models {list(_ROWS)}; jaxrot has {MODELS}")
@@ -56,7 +54,7 @@ def scheme_models_table(docs):
         missing = [name for name in schemes if not (docs / "schemes" / f"{name}.md").is_file()]
         if missing:
             raise ValueError(f"schemes without a page under docs/schemes/: {missing}")
-        kind = "weak order" if model in _WEAK else "order"
+        kind = "weak order" if model in THERMAL_MODELS else "order"
         cells = [f"[`{name}`]({name}.md) ({kind} {scheme.order})" for name, scheme in schemes.items()]
         default = defaults.get(model)
         rows.append(

@@ -24,7 +24,7 @@ import numpy as np
 from .._fluid._fluid import Fluid, check_fluid, temperature_of
 from .._inertia import is_diagonal_form
 from .._particles import unwrap_per_body
-from ..schemes import MODELS, resolve_scheme, schemes_for
+from ..schemes import MODELS, THERMAL_MODELS, resolve_scheme, schemes_for
 from ..schemes._brownian import BrownianStart, for_steps
 from ..schemes._exponential import FluidArgs
 from ..schemes._langevin import ThermalArgs
@@ -69,7 +69,7 @@ _DETERMINISTIC_TRACED = (
 
 def candidates(model: str) -> str:
     """The schemes of ``model`` as a user reads them: ``'exp_midpoint' (order 2), 'exp_rk4' (order 4)``."""
-    kind = "weak order" if model in ("thermal", "brownian") else "order"
+    kind = "weak order" if model in THERMAL_MODELS else "order"
     return ", ".join(f"{name!r} ({kind} {s.order})" for name, s in schemes_for(model).items())
 
 
@@ -152,7 +152,7 @@ def _misfit(scheme, entry, model) -> str:
             "relaxation exactly at any step; or pass the fluid's torque as a plain torque callable, "
             "torque=lambda t, q, omega, args: fluid.torque(q, omega), with a step inside that limit."
         )
-    if model in ("thermal", "brownian") and own:
+    if model in THERMAL_MODELS and own:
         return (
             f"scheme {name!r} has no thermal noise, and `fluid.kT` > 0 needs it: use {candidates(model)}; or "
             f"{'pass kT=0' if model == 'thermal' else 'pass kT=0 without a key'} for a deterministic run."

@@ -57,6 +57,8 @@ from .zhao import Zhao as Zhao
 
 # The models, by the call that runs them (`jaxrot._integrate._bind` describes each to a user).
 MODELS = ("vacuum", "fluid", "thermal", "overdamped", "brownian")
+# The models at a temperature: their schemes' ``order`` is a weak order (of ensemble averages).
+THERMAL_MODELS = ("thermal", "brownian")
 
 # The scheme classes a user may pass as an instance (the overdamped and Brownian ones advance the
 # orientation alone, so they do not share `AbstractScheme`'s inertial step).

@@ -70,10 +70,6 @@ class AbstractLangevinScheme(AbstractScheme):
         """This scheme for a rollout in a fluid whose noise comes from keys of ``key_impl``."""
         return dataclasses.replace(self, key_impl=key_impl)
 
-    def _unpack(self, args):
-        # A `ThermalArgs`: `jaxrot.rollout`'s binder gives no other to a scheme of the thermal model.
-        return args
-
     def state(self, carry):
         return carry.state
 
@@ -81,7 +77,7 @@ class AbstractLangevinScheme(AbstractScheme):
         raise NotImplementedError("drives are not supported in a fluid")
 
     def init(self, state, t0, inertia, torque, args):
-        args, fluid, _ = self._unpack(args)
+        args, fluid, _ = args  # a `ThermalArgs`
         return LangevinCarry(RotState(*state), self.initial_torque(t0, state, torque, args), jnp.int32(0))
 
     def initial_torque(self, t0, state, torque, args):
@@ -89,7 +85,7 @@ class AbstractLangevinScheme(AbstractScheme):
         return None
 
     def step(self, carry, t, dt, inertia, torque, args):
-        args, fluid, key_data = self._unpack(args)
+        args, fluid, key_data = args  # a `ThermalArgs`
         normals = None
         if key_data is not None:
             normals = step_normals(key_data, self.key_impl, carry.step, self.normals_per_step, dt.dtype)
