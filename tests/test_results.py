@@ -81,6 +81,12 @@ RESULTS = {
     # kernels per step of four schemes and jax_md against two floors.
     "gpu_h100/tp_f32_nobar_jax_md.json": ("method", "STEPS=throughput bash benchmarks/gpu.sh"),
     "gpu_h100/passes.json": (None, "STEPS=passes bash benchmarks/gpu.sh"),
+    # The weak orders at 2²¹ bodies (issue 60), on an H200: the thermal schemes, not jaxrot.SCHEMES.
+    "gpu_h200/thermal_orders.json": (
+        None,
+        "python benchmarks/thermal_orders.py --bodies 2097152 --out docs/gpu_h200/thermal_orders.json "
+        "(on the GPU)",
+    ),
 }
 
 

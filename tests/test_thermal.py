@@ -279,9 +279,12 @@ def test_same_key_same_run_whatever_the_layout(small_fluid_problem, name):
     sparse = jaxrot.rollout(name, state, inertia, 0.05, 12, save_every=4, **kwargs)
     chunked = jaxrot.rollout(name, state, inertia, 0.05, 12, save_every=4, chunk_steps=8, **kwargs)
     np.testing.assert_allclose(every.q[::4], sparse.q, rtol=0, atol=ulps)
-    np.testing.assert_allclose(every.omega[::4], sparse.omega, rtol=0, atol=ulps)
+    # ω: 32 ulp of the largest spin (its rounding passes through two rotor calls, three turns and two
+    # kicks a step, twelve steps; measured: 16 ulp of the largest, 1.43)
+    spins = 2 * ulps * max(1.0, float(jnp.max(jnp.abs(every.omega))))
+    np.testing.assert_allclose(every.omega[::4], sparse.omega, rtol=0, atol=spins)
     np.testing.assert_allclose(sparse.q, chunked.q, rtol=0, atol=ulps)
-    np.testing.assert_allclose(sparse.omega, chunked.omega, rtol=0, atol=ulps)
+    np.testing.assert_allclose(sparse.omega, chunked.omega, rtol=0, atol=spins)
     fewer = jaxrot.rollout(name, jaxrot.RotState(state.q[:4], state.omega[:4]), inertia, 0.05, 12, **kwargs)
     np.testing.assert_allclose(every.q[:, :4], fewer.q, rtol=0, atol=ulps)
     other = jaxrot.rollout(name, state, inertia, 0.05, 12, **{**kwargs, "key": jax.random.key(10)})
@@ -369,7 +372,10 @@ def test_bad_thermal_input_is_a_value_error_naming_argument_and_fix():
 # scheme -> (setting, t_end, the observed quantity): the quantity whose bias the scheme's leading
 # error term moves most at 2e4 bodies (docs/thermal_orders.json: fit standard errors 0.02-0.03).
 WEAK_CASES = {
-    "baoab": (problems.DIPOLE_INERTIAL, 8.0, 1),  # ⟨I_1 ω_1²⟩ = kT
+    # ⟨cos θ⟩ = L(2): the temperature's coarsest pair (ζΔt/I = 2 at dt = 1) is pre-asymptotic (local
+    # order 0.87 there, 1.74–1.99 below it, docs/gpu_h200/thermal_orders.json at 2²¹ bodies), which
+    # left its six-level fit at 1.37 ± 0.2, too wide for the band at 2e4 bodies.
+    "baoab": (problems.DIPOLE_INERTIAL, 8.0, 0),
     "exp_euler": (problems.DIPOLE_INERTIAL, 8.0, 0),  # ⟨cos θ⟩ = L(2)
     "brownian_euler": (problems.DIPOLE_OVERDAMPED, 4.0, 0),  # ⟨cos θ⟩ = L(2)
 }

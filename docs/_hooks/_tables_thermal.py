@@ -28,11 +28,17 @@ def thermal_orders_table(docs, name="thermal_orders.json"):
             limit = f"{gap:+.1e} ({gap / r['limit_stderr']:+.1f} σ)"
         quantity = f"{r['quantity']}, {r['setting']}"
         biases = [_bias_cell(r, i) for i in (0, 2, 5)]
-        rows.append(
-            [f"`{r['scheme']}`", r["nominal_order"], _ORACLES[r["oracle"]], quantity, order, *biases, limit]
-        )
+        resolved = [(i, p) for i, p in enumerate(r.get("local_orders") or []) if p is not None]
+        local = "—"
+        if resolved:
+            i, (p, err) = resolved[-1]
+            local = f"{p:.2f} ± {err:.2f} (h = {_sig(r['dt'][i], 2)} → {_sig(r['dt'][i + 1], 2)})"
+        scheme = f"`{r['scheme']}`"
+        oracle = _ORACLES[r["oracle"]]
+        rows.append([scheme, r["nominal_order"], oracle, quantity, order, local, *biases, limit])
     steps = ["bias at dt = t/8", "bias at dt = t/32", "bias at dt = t/256"]
-    header = ["scheme", "nominal", "oracle", "quantity", "fitted weak order", *steps, "extrapolated − exact"]
+    header = ["scheme", "nominal", "oracle", "quantity", "fitted weak order", "finest local order", *steps,
+              "extrapolated − exact"]  # fmt: skip
     note = f" ({data['bodies']} bodies, steps t/8 … t/256)"
     return _table(header, rows) + _provenance(name, data["machine"], note)
 

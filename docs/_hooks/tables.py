@@ -84,6 +84,7 @@ TABLES = {
     "fluid_race_table": fluid_race_table,
     "fluid_race_notes": fluid_race_notes,
     "thermal_orders_table": thermal_orders_table,
+    "thermal_orders_gpu_table": lambda docs: thermal_orders_table(docs, "gpu_h200/thermal_orders.json"),
     "thermal_peers_table": thermal_peers_table,
     "thermal_jax_md_diagnosis": thermal_jax_md_diagnosis,
     "throughput_table": throughput_table,

@@ -13,3 +13,13 @@ LIMITS = {
     "rkmk_dopri5": 1.396,
     "rkmk_dopri8": 2.541,
 }
+
+# The schemes of a fluid at a temperature have no free-body limit (their rotation is exact or
+# relaxed exactly at any ζΔt/I); what bounds their step is the applied torque's stiffness K = |∂τ/∂θ|
+# (torque per radian), from the linearised step about a minimum (jaxrot.schemes.ExpEuler, BAOAB;
+# tests/test_stability.py checks both sides of each edge). `jaxrot.rollout` quotes them.
+TORQUE_LIMITS = {
+    "exp_euler": "stable for a torque of stiffness K = |∂τ/∂θ| while K·dt/ζ <= 2 (ζ the smallest friction)",
+    "baoab": "stable for a torque of stiffness K = |∂τ/∂θ| while K·dt/ζ <= 2 (ζ the smallest friction) "
+    "or K·dt²/I <= 4 (I the smallest moment)",
+}

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core._checks import QUATERNION_NORM_TOL
-from .._core._limits import LIMITS
+from .._core._limits import LIMITS, TORQUE_LIMITS
 
 
 NORM_TOL = QUATERNION_NORM_TOL
@@ -178,7 +178,13 @@ def nonfinite_message(
     dt = float(np.asarray(dt))
     rotation, start = float(max_speed) * dt, float(start_speed) * dt
     limit = LIMITS.get(scheme_name)
-    if limit is None:
+    if scheme_name in TORQUE_LIMITS:
+        advice = (
+            f"{scheme_name!r} has no limit on the rotation per step (jaxrot.stability.LIMITS are a free "
+            f"body's); it is {TORQUE_LIMITS[scheme_name]}: reduce dt below that, or look at the torque and "
+            "the inertia."
+        )
+    elif limit is None:
         advice = (
             f"{scheme_name!r} has no measured limit for a free body below 10 rad per step "
             "(jaxrot.stability.LIMITS): look at the torque and the inertia, or reduce dt."

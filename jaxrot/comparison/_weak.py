@@ -139,6 +139,22 @@ def fit_order(ladder_: "Ladder", k: int = 0):
     return float(coef[1]), float(math.sqrt(covariance[1, 1]))
 
 
+def local_orders(ladder_: "Ladder", k: int = 0):
+    """``[(p, p_stderr) or None]`` per pair of successive differences of quantity ``k``, coarse to fine:
+    ``p = log2(d(h) / d(h/2))``, the order between those steps, where both differences exceed three
+    standard errors and share a sign (None elsewhere). The error adds the two relative errors in
+    quadrature (the differences' correlation, through the shared bodies, is left out)."""
+    d, s = ladder_.difference[:, k], ladder_.difference_stderr[:, k]
+    out = []
+    for a, b, sa, sb in zip(d[:-1], d[1:], s[:-1], s[1:], strict=True):
+        if abs(a) > 3 * sa and abs(b) > 3 * sb and a * b > 0:
+            p = math.log2(a / b)
+            out.append((p, math.hypot(sa / a, sb / b) / math.log(2)))
+        else:
+            out.append(None)
+    return out
+
+
 def extrapolated(ladder_: Ladder, order: float):
     """``(E_0, stderr)``: the finest level's mean with its bias removed by Richardson's rule at ``order``."""
     factor = 1 / (2**order - 1)

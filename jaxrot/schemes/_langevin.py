@@ -105,6 +105,7 @@ def body_flow_rotation(q, fluid):
     return quat.rotate(quat.conjugate(q), flow_rotation(q, fluid.velocity_gradient, fluid.bretherton))
 
 
-def kick(q, moments, impulse):
-    """World ``ω`` change ``R (I⁻¹ ⊙ Rᵀ ΔL)`` of a world angular impulse ``ΔL`` ``(3,)``."""
-    return quat.rotate(q, quat.rotate(quat.conjugate(q), impulse) / moments)
+def kick(q, weights, impulse):
+    """World ``ω`` change ``R (weights ⊙ Rᵀ ΔL)`` of a world angular impulse ``ΔL`` ``(3,)``;
+    ``weights`` ``(3,)`` per body axis (``1/I``: the impulse's own velocity change)."""
+    return quat.rotate(q, weights * quat.rotate(quat.conjugate(q), impulse))

@@ -3,39 +3,59 @@
 from typing import ClassVar
 
 import equinox as eqx
+import jax.numpy as jnp
 
 from .. import quaternion as quat
 from .._free_body._rotor import free_rotor
 from .._state import RotState
 from ._base import world_torque
 from ._langevin import AbstractLangevinScheme, LangevinCarry, body_flow_rotation, kick
-from ._ou import spin_relaxation
+from ._ou import bridge_spread, drift_factor, noise_scale, spin_relaxation
 
 
 class BAOAB(AbstractLangevinScheme):
-    r"""BAOAB on the rotation group: weak order 2, one torque call per step, any ``ζΔt/I``.
+    r"""BAOAB on the rotation group: weak order 2, one torque call per step, right at any ``ζΔt/I``.
 
-    One step from ``(q, ω)`` at ``t``, with ``τ`` the applied torque carried from the last step:
+    One step from ``(q, ω)`` at ``t``, with ``τ`` the applied torque carried from the last step, and per
+    principal axis ``x_k = ζ_k Δt / I_k``, ``c_k = (Δt/2) f(x_k)``, ``f(x) = tanh(x/2)/(x/2)``
+    (`jaxrot.schemes._ou.drift_factor`: 1 at ``x = 0``, ``2/x`` far out):
 
-    1. B: half kick, world ``L += Δt/2 · τ``;
-    2. A: free rotation over ``Δt/2`` by the exact rotor (`jaxrot._free_body._rotor.free_rotor`,
-       the preprocessed discrete Moser–Veselov map: exact to round-off);
-    3. O: the spin's exact Ornstein–Uhlenbeck flow over ``Δt`` at fixed orientation, about each
-       principal axis (`jaxrot.schemes._ou.spin_relaxation`): relaxed towards the flow's rotation at
-       ``exp(−ζ_k Δt / I_k)`` with the noise that keeps ``⟨I_k ω_k²⟩ = kT``;
-    4. A: free rotation over ``Δt/2``;
-    5. B: ``τ₁ = T(t + Δt, q₁, ω̃)`` (``ω̃`` after a predictor half kick by ``τ``, so that a torque
-       that depends on ``ω`` sees an ``O(Δt²)``-accurate velocity), half kick by ``τ₁``; ``τ₁`` is
-       carried.
+    1. B: kick ``u += (2 − f) ⊙ I⁻¹ τ_b Δt/2`` (body frame; with the ``f ⊙`` part of the last step's
+       kick, which is in the returned ``ω``, a whole ``I⁻¹ τ_b Δt`` since the last A);
+    2. A: free rotation by the exact rotor (`jaxrot._free_body._rotor.free_rotor`, the preprocessed
+       discrete Moser–Veselov map) over ``s = min_k c_k``, after a turn ``q ⊗ exp((c − s) ⊙ u)``;
+    3. O: the spin's exact Ornstein–Uhlenbeck flow over ``Δt`` towards the flow's rotation ``S``
+       (`jaxrot.schemes._ou.spin_relaxation`), and the turn ``q ⊗ exp((Δt − 2c) ⊙ S + a Δt √W ⊙ ξ₂)``;
+    4. A: the rotor over ``s``, then the turn ``q ⊗ exp((c − s) ⊙ u)``;
+    5. B: ``τ₁ = T(t + Δt, q₁, ω̃)`` with ``ω̃ = u + f ⊙ I⁻¹ τ_b Δt/2`` (for a torque that depends on
+       ``ω``), and the returned ``ω₁ = u + f ⊙ I⁻¹ τ₁,b Δt/2``; ``τ₁`` is carried.
 
-    A symmetric splitting of the generator, so weak order 2 for ensemble averages at a fixed time
-    and for the stationary law (Leimkuhler & Matthews); the free rotor and the O step preserve the
-    Maxwell law exactly, so a torque-free body keeps ``⟨I_k ω_k²⟩ = kT`` at any step. ``|q| = 1`` to
-    round-off (the rotor's unit quaternions). Stable at any ``ζΔt/I``, but the A steps move the
-    body with its inertial spin: when ``ζΔt/I ≫ 1`` the orientation diffuses at a wrong rate
-    (a factor ``≈ ζΔt/(4I)``), as every Langevin splitting does; there take `ExpEuler` (exact in
-    that limit) or `jaxrot.overdamped_rollout`. This is the ordering of `jax_md`'s rigid-body
-    ``nvt_langevin``, with the exact rotor instead of NO_SQUISH's splitting of it.
+    Why the A steps move by ``c``, not ``Δt/2``: for the linear OU process of a spin about an axis,
+    the angle turned over the step is Gaussian given the spins at both ends, with mean
+    ``(Δt − 2c) S + c (u₀ + u₁)`` and variance ``(a Δt)² W(x)`` (`jaxrot.schemes._ou`; ``a = √(kT ζ Δt)/I``).
+    So A(c) O A(c) plus that turn is the exact A+O flow of a sphere, at any ``x``. At ``x = 0`` it is
+    BAOAB's A(Δt/2) O A(Δt/2) (``c = Δt/2``, the turn vanishes), and for small ``x`` it differs
+    from it by ``O(x²Δt)``: weak order 2 is kept. As ``x → ∞`` the A steps turn by ``(I/ζ) u``, the
+    inertial spin's true share (``√(kT I)/ζ``, vanishing with ``I``), and the middle turn carries the
+    Brownian displacement ``N(S Δt, 2 kT Δt/ζ)`` and, with step 1's kick, the drift ``τ Δt/ζ``: the
+    step tends to the geometric Euler–Maruyama step of the overdamped model, with the right
+    diffusion. Textbook BAOAB (A over ``Δt/2``) turns the body by ``√(kT/I) Δt/2`` there (tens of
+    radians for a micron particle), diffuses ``ζΔt/(4I)`` times too fast, and its rotor runs out of
+    range. The returned ``ω`` carries ``f`` of the last half kick and ``(1 − f) (S(q₁) − S(q_½))``
+    (the O step relaxed the spin to the flow's rotation at the midpoint): BAOAB's at ``x = 0`` (both
+    differ from it by ``O(x²Δt)``), the overdamped velocity ``S(q₁) + ζ⁻¹ τ_b(q₁)`` (within
+    ``O(√(kT/I))`` noise) at ``x → ∞``.
+
+    Exact properties kept: the rotor (over any time ``s``) and the O step preserve the Maxwell law,
+    and the extra turns move ``q`` alone, so a torque-free body in a fluid at rest keeps
+    ``⟨I_k ω_k²⟩ = kT`` at any step; where ``x`` is equal on all axes (``ζ ∝ I``) the turns
+    ``(c − s) ⊙ u`` vanish and the world angular momentum of a torque-free body is the exact OU
+    process. ``|q| = 1`` to round-off. With a torque the kicks are explicit: linearised about a
+    minimum of stiffness ``K = |∂τ/∂θ|``, the step is stable while ``K Δt²/I ≤ 4`` (velocity Verlet's
+    limit) or ``K Δt/ζ ≤ 2`` (the overdamped Euler step's), at every ``x`` (checked on a grid of
+    ``x`` from 1e-4 to 1e7; `tests/test_thermal_stiffness.py` runs both sides of each edge).
+    This is the ordering of `jax_md`'s rigid-body ``nvt_langevin``, with the exact rotor instead of
+    NO_SQUISH's splitting of it.
 
     References:
         R. L. Davidchack, T. E. Ouldridge and M. V. Tretyakov, "New Langevin and gradient thermostats
@@ -61,30 +81,51 @@ class BAOAB(AbstractLangevinScheme):
     models: ClassVar[frozenset[str]] = frozenset({"thermal"})
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
-    normals_per_step: ClassVar[int] = 3
+    normals_per_step: ClassVar[int] = 6
     rotor_substeps: int | None = eqx.field(default=None, static=True)
 
     def initial_torque(self, t0, state, torque, args):
         return None if torque is None else world_torque(torque, t0, *state, args)
 
-    def _rotate_freely(self, q, omega, moments, t):
-        return free_rotor(q, omega, moments, t, substeps=self.rotor_substeps)
+    def _drift(self, q, omega, moments, s, extra, first):
+        """A: the rotor over ``s`` and the turn ``q ⊗ exp(extra ⊙ u)``, the turn first when ``first``."""
+
+        def turn(q, omega):
+            return quat.multiply(q, quat.exp(extra * quat.rotate(quat.conjugate(q), omega)))
+
+        if first:
+            q = turn(q, omega)
+        q, omega = free_rotor(q, omega, moments, s, substeps=self.rotor_substeps)
+        return (turn(q, omega) if not first else q), omega
 
     def advance(self, carry, t, dt, inertia, torque, args, fluid, normals):
         (q, omega), tau, step = carry
         moments = inertia.tensor
         half = 0.5 * dt
+        x = fluid.friction / moments * dt
+        f = drift_factor(x)
+        c = half * f
+        s = jnp.min(c)
         if torque is not None:
-            omega = omega + kick(q, moments, half * tau)
-        q, omega = self._rotate_freely(q, omega, moments, half)
+            omega = omega + kick(q, (2 - f) / moments, half * tau)
+        q, omega = self._drift(q, omega, moments, s, c - s, first=True)
         spin = quat.rotate(quat.conjugate(q), omega)
-        spin = spin_relaxation(
-            spin, body_flow_rotation(q, fluid), fluid.friction, moments, fluid.kT, dt, normals
-        )
-        q, omega = self._rotate_freely(q, quat.rotate(q, spin), moments, half)
+        slow = body_flow_rotation(q, fluid)
+        turn = (dt - 2 * c) * slow
+        if normals is not None:
+            a = noise_scale(fluid.kT, fluid.friction, dt, moments)
+            turn = turn + (a * dt * bridge_spread(x)) * normals[3:]
+            normals = normals[:3]
+        spin = spin_relaxation(spin, slow, fluid.friction, moments, fluid.kT, dt, normals)
+        q = quat.multiply(q, quat.exp(turn))
+        q, omega = self._drift(q, quat.rotate(q, spin), moments, s, c - s, first=False)
+        q = quat.normalize(q)
+        if fluid.velocity_gradient is not None:  # the spin relaxed to S(q_½): (1 − f) of it moved to S(q₁)
+            lag = (1 - f) * (body_flow_rotation(q, fluid) - slow)
+            omega = omega + quat.rotate(q, lag)
         tau1 = None
         if torque is not None:
-            predicted = omega + kick(q, moments, half * tau)
+            predicted = omega + kick(q, f / moments, half * tau)
             tau1 = world_torque(torque, t + dt, q, predicted, args)
-            omega = omega + kick(q, moments, half * tau1)
+            omega = omega + kick(q, f / moments, half * tau1)
         return LangevinCarry(RotState(q, omega), tau1, step + 1)
