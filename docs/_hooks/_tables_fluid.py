@@ -22,6 +22,28 @@ def fluid_orders_table(docs, name="fluid_orders.json"):
     return _table(header, rows) + _provenance(name, data["machine"])
 
 
+def fluid_layer_table(docs, name="fluid_layer.json"):
+    """`benchmarks/fluid_layer.py`: local orders across ζΔt/I, off and on the slow manifold, graded or not."""
+    data = _read(docs, name)
+    rows = []
+    for r in data["rows"]:
+        span = r["zeta_dt_over_inertia"]
+        local = " ".join(f"{x:.1f}" for x in r["local_orders"])
+        rows.append(
+            [
+                f"`{r['scheme']}`",
+                f"{r['rate']:.0e}",
+                f"{_sig(span[0], 2)} → {_sig(span[-1], 2)}",
+                "at rest" if r["start"] == "off" else "on S",
+                "yes" if r["graded_start"] else "no",
+                f"{_sig(r['errors'][0], 2)} → {_sig(r['errors'][-1], 2)}",
+                local,
+            ]
+        )
+    header = ["scheme", "ζ/I", "ζΔt/I", "start", "graded start", "error (rad)", "local orders"]
+    return _table(header, rows) + _provenance(name, data["machine"])
+
+
 def _fluid_race(docs, name):
     path = docs / name
     return json.loads(path.read_text()) if path.exists() else None
