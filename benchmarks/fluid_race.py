@@ -7,8 +7,9 @@ The Stokes number St = I_⊥ γ̇ / ζ_⊥ sets the friction's stiffness: ζΔt/
 1e-5. Rows:
 
 - jaxrot, inertial: ``exp_rk4`` and ``exp_midpoint`` with ``fluid=`` (step ladders as in
-  ``benchmarks/race.py``), and ``exp_rk4`` with ``graded_start=False`` ("plain start"); at St = 1e-1 also ``rkmk_dopri8`` with the fluid's torque as a plain
-  callable, which is stable while ζΔt/I < ~2.5 (its ladder starts inside that);
+  ``benchmarks/race.py``), and ``exp_rk4`` with ``graded_start=False`` ("plain start"); at St = 1e-1
+  also ``rkmk_dopri8`` with the fluid's torque as a plain callable, which is stable while ζΔt/I < ~2.5
+  (its ladder starts inside that);
 - jaxrot, overdamped: `jaxrot.overdamped_rollout`'s ``rkmk4`` and ``lie_midpoint``:
   no inertia, so their error against the inertial reference stops at the model's own, of order St;
   the table says below which budget that disqualifies them;
