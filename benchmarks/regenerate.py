@@ -162,6 +162,7 @@ JOBS = {
     ),
     # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
     "fluid_orders": Job(("fluid_orders.json",), ("benchmarks/fluid_orders.py",), 12),
+    "fluid_layer": Job(("fluid_layer.json",), ("benchmarks/fluid_layer.py",), 8),
     "overdamped_cost": Job(
         ("overdamped_cost_cpu.json",),
         ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),

@@ -6,6 +6,7 @@ import numpy as np
 
 import jaxrot
 from jaxrot import quaternion as quat
+from jaxrot.schemes._base import advance as advance_step
 
 
 MOMENTS = jnp.array([1.0, 2.0, 3.0])
@@ -122,7 +123,8 @@ def central_difference_grad(f, primals, argnum, rel_step=1e-4):
 def fixed_step_advance(scheme, inertia, torque=None, args=None):
     """``(init, advance, state)`` for one body: the scheme's own ``init``/``step``/``state``, with
     ``advance(carry, first_step, dt, n)`` taking ``n`` steps from step number ``first_step`` (time
-    ``first_step · dt``) in a ``fori_loop`` with a runtime trip count, so any dt and n share one
+    ``first_step · dt``; a fluid scheme's graded start counted from step 0) in a ``fori_loop`` with a
+    runtime trip count, so any dt and n share one
     compilation (`jaxrot.rollout` fixes ``n_steps`` at trace time; its equivalence to these methods is
     tested for every scheme elsewhere)."""
     scheme = jaxrot.schemes.resolve_scheme(scheme)
@@ -134,7 +136,9 @@ def fixed_step_advance(scheme, inertia, torque=None, args=None):
     @jax.jit
     def advance(carry, first_step, dt, n):
         def step(i, c):
-            return scheme.step(c, (first_step + i).astype(dt.dtype) * dt, dt, inertia, torque, args)
+            index = first_step + i
+            t = index.astype(dt.dtype) * dt
+            return advance_step(scheme, c, index, t, jnp.zeros_like(dt), dt, inertia, torque, args)
 
         return jax.lax.fori_loop(0, n, step, carry)
 

@@ -43,6 +43,7 @@ RESULTS = {
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
     # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
     "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
+    "fluid_layer.json": (None, "python benchmarks/regenerate.py --only fluid_layer"),
     "overdamped_cost_cpu.json": (None, "python benchmarks/regenerate.py --only overdamped_cost"),
     # Bodies at a temperature: the thermal schemes and the peers, not jaxrot.SCHEMES.
     "thermal_orders.json": (None, "python benchmarks/regenerate.py --only thermal_orders"),

@@ -27,6 +27,7 @@ from _tables_accuracy import (  # noqa: E402
     stability_limits_table,
 )
 from _tables_fluid import (  # noqa: E402
+    fluid_layer_table,
     fluid_orders_table,
     fluid_race_figure,
     fluid_race_notes,
@@ -80,6 +81,7 @@ __all__ = ["TABLES", "on_page_markdown", "race_ratios"]
 TABLES = {
     "scheme_models_table": scheme_models_table,
     "fluid_orders_table": fluid_orders_table,
+    "fluid_layer_table": fluid_layer_table,
     "fluid_race_figure": fluid_race_figure,
     "fluid_race_table": fluid_race_table,
     "fluid_race_notes": fluid_race_notes,

@@ -186,7 +186,7 @@ def _overdamped_flat(scheme, q, fluid, fluid_axes, dt, t0, torque, args, args_ax
 
     carry = init_all(q, fluid, args)
     saved = saved_steps(
-        carry, lambda c, t: step_all(c, t, fluid, args), lambda c: c, dt, save_every, n_saves, t0
+        carry, lambda c, t, _: step_all(c, t, fluid, args), lambda c: c, dt, save_every, n_saves, t0
     )
     t = t0 + jnp.arange(n_saves + 1).astype(dt.dtype) * (save_every * dt)
     return Trajectory(

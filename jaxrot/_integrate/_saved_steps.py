@@ -17,7 +17,7 @@ def saved_steps(carry, step, read, dt, steps_per_save, n_saves, t0=None):
 
     Args:
         carry: the scheme's carry at ``t0`` (any pytree; bodies vmapped inside ``step`` or outside).
-        step: ``step(carry, t) -> carry``, one step of ``dt`` from time ``t``.
+        step: ``step(carry, t, index) -> carry``, step ``index`` (from 0) of ``dt`` from time ``t``.
         read: what to save of a carry (a `RotState`, or the carry itself).
         dt: the step (a scalar array); steps_per_save: steps between saves (an int, or a traced one);
         n_saves: the number of saves (a Python int); t0: the start time, or None for 0.
@@ -25,8 +25,9 @@ def saved_steps(carry, step, read, dt, steps_per_save, n_saves, t0=None):
 
     def save(carry, k):
         def one_step(j, c):
-            t = (k * steps_per_save + j).astype(dt.dtype) * dt
-            return step(c, t if t0 is None else t0 + t)
+            index = k * steps_per_save + j
+            t = index.astype(dt.dtype) * dt
+            return step(c, t if t0 is None else t0 + t, index)
 
         carry = jax.lax.fori_loop(0, steps_per_save, one_step, carry)
         return carry, read(carry)

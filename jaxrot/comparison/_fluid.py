@@ -31,6 +31,7 @@ from .._particles import PARTICLES
 from .._state import RotState, Trajectory
 from ..scenes import FLUID_SCENES
 from ..schemes import FLUID_SCHEMES, OVERDAMPED_SCHEMES
+from ..schemes._base import advance
 from ..schemes._exponential import FluidArgs
 from . import _ladder as comparison
 
@@ -64,8 +65,9 @@ def inertial_runner(scheme, scene, n_bodies):
 
     def run(state, dt, n, saves):
         def one(q, omega):
-            carry = scheme.init(RotState(q, omega), jnp.zeros((), q.dtype), inertia, scene.torque, args)
-            step = lambda c, t: scheme.step(c, t, dt, inertia, scene.torque, args)  # noqa: E731
+            t0 = jnp.zeros((), q.dtype)
+            carry = scheme.init(RotState(q, omega), t0, inertia, scene.torque, args)
+            step = lambda c, t, k: advance(scheme, c, k, t, t0, dt, inertia, scene.torque, args)  # noqa: E731
             return saved_steps(carry, step, scheme.state, dt, n, saves)
 
         return jax.vmap(one, axis_name=PARTICLES, out_axes=1)(state.q, state.omega)
@@ -81,7 +83,7 @@ def overdamped_runner(scheme, scene, n_bodies):
     def run(state, dt, n, saves):
         def one(q):
             carry = scheme.init(q, jnp.zeros((), q.dtype), velocity)
-            step = lambda c, t: scheme.step(c, t, dt, velocity)  # noqa: E731
+            step = lambda c, t, _: scheme.step(c, t, dt, velocity)  # noqa: E731
             return saved_steps(carry, step, lambda c: c, dt, n, saves)
 
         return jax.vmap(one, axis_name=PARTICLES, out_axes=1)(state.q)

@@ -28,6 +28,7 @@ from .._state import RotState
 from .._validation import check_bodies
 from ..scenes import SCENES
 from ..schemes import SCHEMES
+from ..schemes._base import advance
 from ._report import (
     ASYMPTOTIC_ERROR,
     stalled,
@@ -280,15 +281,15 @@ def _fixed_runner(problem: _Problem, scheme):
             axis_name=PARTICLES,
         )
         step = jax.vmap(
-            lambda c, t, i, a: scheme.step(c, t, dt, i, sc.torque, a),
-            in_axes=(0, None, inertia_axis, p.args_axes),
+            lambda c, t, k, i, a: advance(scheme, c, k, t, t0, dt, i, sc.torque, a),
+            in_axes=(0, None, None, inertia_axis, p.args_axes),
             axis_name=PARTICLES,
         )
 
         carry = init(flat, inertia, p.flat_args)
         saved = saved_steps(
             carry,
-            lambda c, t: step(c, t, inertia, p.flat_args),
+            lambda c, t, k: step(c, t, k, inertia, p.flat_args),
             jax.vmap(scheme.state),
             dt,
             factor,

@@ -78,6 +78,15 @@ class AbstractScheme(eqx.Module):
     def step(self, carry, t, dt, inertia: BodyInertia, torque: Torque | None, args) -> Any:
         """Advance one body's ``carry`` from time ``t`` to ``t + dt``; returns the new carry."""
 
+    @property
+    def start_steps(self) -> int:
+        """How many steps from a run's start `start_step` takes instead of `step` (0: none)."""
+        return 0
+
+    def start_step(self, carry, t, dt, t0, inertia: BodyInertia, torque: Torque | None, args) -> Any:
+        """One of the first `start_steps` steps of a run that began at ``t0``; `step` unless overridden."""
+        return self.step(carry, t, dt, inertia, torque, args)
+
     def state(self, carry) -> RotState:
         """The `RotState` held in a carry."""
         return carry
@@ -124,3 +133,22 @@ def body_torque(torque: Torque | None, t, q, omega, args):
     if torque is None:
         return None
     return stage(quat.rotate(quat.conjugate(q), world_torque(torque, t, q, omega, args)))
+
+
+def advance(
+    scheme: AbstractScheme, carry, index, t, t0, dt, inertia: BodyInertia, torque: Torque | None, args
+):
+    """Step ``index`` (from 0) of a run begun at ``t0``: `AbstractScheme.start_step` for the first
+    ``scheme.start_steps``, `AbstractScheme.step` after.
+
+    ``index`` must not depend on the body (a loop counter): under `jax.vmap` the choice stays one
+    branch, not a select that would compute both.
+    """
+    if scheme.start_steps == 0:
+        return scheme.step(carry, t, dt, inertia, torque, args)
+    return jax.lax.cond(
+        index < scheme.start_steps,
+        lambda c: scheme.start_step(c, t, dt, t0, inertia, torque, args),
+        lambda c: scheme.step(c, t, dt, inertia, torque, args),
+        carry,
+    )
