@@ -182,6 +182,36 @@ def cost(system, label, dt, steps, rounds):
     return found
 
 
+def plot(json_path, png_path):
+    """Per-axis rotational temperature / kT against dt, both thermostats (free bodies), from the results."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = json.loads(Path(json_path).read_text())
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    styles = {"jaxrot baoab": ("tab:blue", "o"), "jax_md nvt_langevin": ("tab:red", "s")}
+    for method, (color, marker) in styles.items():
+        rows = sorted((r for r in data["rows"] if r["system"] == "free" and r["method"] == method),
+                      key=lambda r: r["dt"])  # fmt: skip
+        dts = np.array([r["dt"] for r in rows])
+        for axis, fill in zip(range(3), ("full", "left", "none"), strict=True):
+            ax.errorbar(dts * (1 + 0.04 * (axis - 1)), [r["axes"][axis] for r in rows],
+                        yerr=[2 * r["axes_error"][axis] for r in rows], color=color, marker=marker,
+                        fillstyle=fill, ls="-" if axis == 0 else ":", capsize=2,
+                        label=f"{method}, axis {axis + 1}")  # fmt: skip
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.axhline(5 / 6, color="gray", lw=0.8, ls="--")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("dt")
+    ax.set_ylabel("⟨L_l² / I_l⟩ / kT")
+    ax.set_title("Rotational temperature per body axis (free tetrahedra, ±2σ)")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+
+
 def report(label, row):
     axes, errors = np.round(row["axes"], 3), np.round(row["axes_error"], 3)
     print(f"{label} {row['method']:20s} axes {axes} ± {errors} centres {row['centres']:.3f}", file=sys.stderr)
@@ -193,7 +223,12 @@ def main(argv=None):
     parser.add_argument("--snapshots", type=int, default=40, help="snapshots per temperature")
     parser.add_argument("--quick", action="store_true", help="tiny sizes, nothing written")
     parser.add_argument("--out", default=str(ROOT / "docs" / "jax_md_cpu.json"))
+    parser.add_argument("--plot-only", action="store_true", help="redraw the figure from --out and exit")
     args = parser.parse_args(argv)
+    png = str(Path(args.out).with_suffix(".png"))
+    if args.plot_only:
+        plot(args.out, png)
+        return
     n, snapshots = (256, 8) if args.quick else (args.bodies, args.snapshots)
     free = free_system(n)
     rows = []
@@ -228,7 +263,8 @@ def main(argv=None):
         "cost": cost_rows,
     }
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
-    print(f"wrote {args.out}", file=sys.stderr)
+    plot(args.out, png)
+    print(f"wrote {args.out} and {png}", file=sys.stderr)
 
 
 if __name__ == "__main__":

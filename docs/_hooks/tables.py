@@ -37,6 +37,11 @@ from _tables_identify import (  # noqa: E402
     identify_speed_table,
     identify_sysid_table,
 )
+from _tables_jax_md import (  # noqa: E402
+    jax_md_cost_table,
+    jax_md_energy_table,
+    jax_md_temperature_table,
+)
 from _tables_performance import (  # noqa: E402
     compile_table,
     cpu_vector_width_table,
@@ -86,6 +91,9 @@ TABLES = {
     "thermal_orders_table": thermal_orders_table,
     "thermal_peers_table": thermal_peers_table,
     "thermal_jax_md_diagnosis": thermal_jax_md_diagnosis,
+    "jax_md_temperature_table": jax_md_temperature_table,
+    "jax_md_energy_table": jax_md_energy_table,
+    "jax_md_cost_table": jax_md_cost_table,
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "gradient_compile_table": gradient_compile_table,
