@@ -209,8 +209,8 @@ def nvt_langevin(energy_or_force_fn, shift_fn, dt, kT, gamma=0.1, *, scheme="bao
     same keys: the same numbers); the orientations by ``scheme``'s torque-free step between jax_md's
     half kicks, the torque the energy's gradient in the orientation (jax_md's force). With the
     default ``"baoab"`` (exact free rotor, exact Ornstein–Uhlenbeck step) each body axis samples
-    ``⟨L_l²/I_l⟩ = kT`` at any ``dt`` for free bodies; jax_md's own O step gives ``5/6 kT``
-    (docs/jax_md_upstream_report.md).
+    ``⟨L_l²/I_l⟩ = kT`` at any ``dt`` for free bodies; jax_md's own O step misses it on each axis
+    (about 5/6 kT at small dt; docs/jax_md_upstream_report.md).
 
     Args:
         energy_or_force_fn: jax_md's energy (or force) of the ``RigidBody`` positions.
