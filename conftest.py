@@ -1,6 +1,7 @@
 """Test configuration, in the style of diffrax/equinox: float64 on, strict promotion."""
 
 import importlib.metadata
+import importlib.util
 import os
 
 
@@ -72,13 +73,32 @@ def _release_compiled_code():
 
 # Long items that cannot carry a decorator: the notebooks (also executed by the documentation build,
 # `mkdocs build`, in .ci/run) and the longest docstring examples. Run them with `pytest -m slow`.
-SLOW_ITEMS = ("notebooks/", "jaxrot/stability.py::", "jaxrot/comparison.py::")
+SLOW_ITEMS = ("notebooks/", "jaxrot/stability.py::", "jaxrot/comparison.py::", "jaxrot/jax_md/_simulate.py::")
+
+
+# The jax_md adapter and its notebook import jax_md, an optional extra (`pip install -e ".[jax_md]"`,
+# Python 3.12: jax_md excludes jax 0.10.2): without it their doctests and cells are not collected
+# (tests/test_jax_md.py skips itself with a message).
+collect_ignore_glob = (
+    [] if importlib.util.find_spec("jax_md") else ["jaxrot/jax_md/*", "notebooks/jax_md*.ipynb"]
+)
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.nodeid.startswith(SLOW_ITEMS):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def _jax_md_promotion(request):
+    """jax_md's own code (the shapes and energies a test builds) needs JAX's default promotion rules, not
+    this suite's strict ones: in the adapter's tests and doctests they are the default ones."""
+    if "jax_md" not in request.node.nodeid:
+        yield
+        return
+    with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
+        yield
 
 
 @pytest.fixture

@@ -15,7 +15,9 @@ The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machi
 made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
 ``benchmarks/gpu.sh``. The ``jax_md`` column of the throughput table needs
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
-left out. The ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the
+left out. The ``jax_md_rigid`` job needs ``.[jax_md]`` (Python 3.12); without it, it says so and
+leaves its file as it was: run it with ``--only jax_md_rigid --python <py312 venv>/bin/python``. The
+``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the
 repository root with a clean checkout: a results file made from uncommitted package or benchmark
 code carries ``+dirty`` in its commit.
 """
@@ -155,6 +157,9 @@ JOBS = {
     ),
     # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
     "thermal_peers": Job(("thermal_peers.json",), ("benchmarks/thermal_peers.py", "--timing"), 25, True),
+    # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
+    # error, cost per body-step (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    "jax_md_rigid": Job(("jax_md_cpu.json", "jax_md_cpu.png"), ("benchmarks/jax_md_rigid.py",), 20, True),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),
         ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),

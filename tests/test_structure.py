@@ -23,6 +23,8 @@ import jaxrot
 
 
 PACKAGE_DIR = pathlib.Path(jaxrot.__file__).parent
+# Rooms that import an optional dependency (an extra): `import jaxrot` never imports them.
+OPTIONAL = ("jaxrot.jax_md",)
 
 
 def module_names(root: pathlib.Path, package: str) -> dict[str, pathlib.Path]:
@@ -160,7 +162,11 @@ def test_importing_jaxrot_starts_no_jax_backend():
     a module that computes with JAX at import (a table checked with ``jnp``) starts the backend
     first and that configuration then raises. Measured: the exponential tableaux' import-time check
     did, and tests/test_multiprocess.py's workers failed."""
-    modules = sorted(n for n in module_names(PACKAGE_DIR, "jaxrot") if "__main__" not in n)
+    # jaxrot.jax_md, the optional adapter, imports jax_md, which computes at import (its shapes' tables):
+    # a user imports it on purpose, after configuring JAX.
+    modules = sorted(
+        n for n in module_names(PACKAGE_DIR, "jaxrot") if "__main__" not in n and not n.startswith(OPTIONAL)
+    )
     program = (
         "import importlib, jax\n"
         f"for name in {modules!r}:\n"
@@ -182,7 +188,7 @@ FLOORS = [
     ["torques", "_free_body", "_fluid", "diagnostics"],  # what turns a body, the medium, measures
     ["schemes", "analytic", "scenes"],  # one step; exact motions; problems
     ["_integrate"],  # every loop, and the binder that decides which scheme fits which call
-    ["_diffrax", "stability", "_fit"],  # the diffrax face and reference; step-size limits; fitting
+    ["_diffrax", "stability", "_fit", "jax_md"],  # diffrax face; step-size limits; fitting; jax_md adapter
     ["comparison"],  # all measurement
     ["__init__", "__main__"],  # the package's face, the command line
 ]
@@ -274,6 +280,17 @@ def test_no_jaxrot_import_inside_a_function():
                     if _import_targets(node, name, path.name == "__init__.py", modules):
                         late.append(f"{path.relative_to(PACKAGE_DIR.parent)}:{node.lineno}")
     assert late == []
+
+
+def test_optional_rooms_stay_out_of_import_jaxrot():
+    """``import jaxrot`` imports no optional room (nor its dependency): ``import jaxrot.jax_md`` does."""
+    program = (
+        "import sys, jaxrot\n"
+        "print(sorted(m for m in sys.modules if m.startswith(('jax_md', 'jaxrot.jax_md'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip() == "[]"
 
 
 def test_all_lists_every_public_name():

@@ -38,6 +38,11 @@ from _tables_identify import (  # noqa: E402
     identify_speed_table,
     identify_sysid_table,
 )
+from _tables_jax_md import (  # noqa: E402
+    jax_md_cost_table,
+    jax_md_energy_table,
+    jax_md_temperature_table,
+)
 from _tables_performance import (  # noqa: E402
     compile_table,
     cpu_vector_width_table,
@@ -89,6 +94,9 @@ TABLES = {
     "thermal_orders_gpu_table": lambda docs: thermal_orders_table(docs, "gpu_h200/thermal_orders.json"),
     "thermal_peers_table": thermal_peers_table,
     "thermal_jax_md_diagnosis": thermal_jax_md_diagnosis,
+    "jax_md_temperature_table": jax_md_temperature_table,
+    "jax_md_energy_table": jax_md_energy_table,
+    "jax_md_cost_table": jax_md_cost_table,
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "gradient_compile_table": gradient_compile_table,
