@@ -184,6 +184,8 @@ def bind_fluid(scheme, model, fluid, key, batch_shape, dtype, inertia, args, arg
         raise ValueError("`drive` and `fluid` cannot be combined: pass one of them.")
     values, axes = check_fluid(fluid, batch_shape, dtype)
     if model == "thermal":
+        # At a kT known to be 0 there is no noise to draw: the same program with a key or without.
+        key = None if fluid.temperature == "zero" else key
         return bind_thermal(scheme, values, axes, args, args_axes, key, int(np.prod(batch_shape)))
     return scheme.in_fluid(), FluidArgs(args, values), FluidArgs(args_axes, axes)
 
