@@ -28,7 +28,6 @@ Each is checked, and a failure is named in ``problems`` (one sentence each):
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -67,7 +66,7 @@ def diagnose(settings, solution, found, estimated) -> Health:
     if not finite:
         problems.append("the residuals or their Jacobian are not finite at the end")
     else:
-        dropped = _dropped_directions(jac, settings.rcond, settings.dtype)
+        dropped = _dropped_directions(found, settings.dtype, jac.shape)
         if dropped:
             problems.append(
                 f"the Jacobian is too ill-conditioned for Gauss–Newton: {dropped} direction(s) that the "
@@ -87,27 +86,14 @@ def diagnose(settings, solution, found, estimated) -> Health:
     return Health(tuple(problems), unsettled)
 
 
-def _dropped_directions(jac, rcond, dtype):
+def _dropped_directions(found, dtype, shape):
     """How many directions kept by the covariance (column-scaled ``J``, above ``rcond``) the
-    Gauss–Newton step drops (unscaled ``J``, below ``eps · max(m, n)`` of the fit's dtype)."""
-    if jac.size == 0:
+    Gauss–Newton step drops (unscaled ``J`` of ``shape``, below ``eps · max(m, n)`` of the fit's dtype)."""
+    s_raw = found.raw_singular_values
+    if s_raw.size == 0 or not s_raw[0] > 0:
         return 0
-    s_raw, s_scaled = (np.asarray(s, np.float64) for s in _singular_values(jnp.asarray(jac)))
-    if not (s_raw[0] > 0 and s_scaled[0] > 0):
-        return 0
-    kept = int(np.sum(s_scaled > rcond * s_scaled[0]))
-    seen = int(np.sum(s_raw > float(jnp.finfo(dtype).eps) * max(jac.shape) * s_raw[0]))
-    return max(kept - seen, 0)
-
-
-@jax.jit
-def _singular_values(jac):
-    """Singular values of ``J`` and of ``J`` with unit columns, from their triangular factors (compiled:
-    see `_covariance._scaled_svd` on NumPy's LAPACK right after a fit)."""
-    norms = jnp.linalg.norm(jac, axis=0)
-    scaled = jac / jnp.where(norms > 0, norms, 1)[None, :]
-    raw = jnp.linalg.svd(jnp.linalg.qr(jac, mode="r"), compute_uv=False)
-    return raw, jnp.linalg.svd(jnp.linalg.qr(scaled, mode="r"), compute_uv=False)
+    seen = int(np.sum(s_raw > float(jnp.finfo(dtype).eps) * max(shape) * s_raw[0]))
+    return max(found.kept - seen, 0)
 
 
 def _unsettled(jac, r, found):

@@ -31,6 +31,8 @@ class Uncertainties(NamedTuple):
     fitted: tuple  # (inertia, args, q0, omega0, sensors) at the optimum
     stderr: tuple  # the same fields' standard errors (0 where held, inf where undetermined)
     parameter_jacobian: np.ndarray  # (p, n) ∂(labelled parameters)/∂φ
+    kept: int  # directions of the column-scaled Jacobian the covariance keeps
+    raw_singular_values: np.ndarray  # of the unscaled Jacobian (the optimiser's view)
 
 
 def element_labels(base, shape):
@@ -175,4 +177,7 @@ def uncertainty(solution, settings) -> Uncertainties:
     estimates = np.array(g_values, np.float64)
     estimates[[name.startswith("q0[") for name in names]] = 0.0  # rotations from the fitted q0
     g = np.asarray(g, np.float64)
-    return Uncertainties(names, units, estimates, result.covariance, result.unidentified, fitted, stderr, g)
+    return Uncertainties(
+        names, units, estimates, result.covariance, result.unidentified, fitted, stderr, g, result.kept,
+        result.raw_singular_values,
+    )  # fmt: skip
