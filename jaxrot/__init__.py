@@ -24,6 +24,7 @@ from ._diffrax._term import RigidBodyTerm as RigidBodyTerm
 from ._fit import (
     Experiment as Experiment,
     FitResult as FitResult,
+    FitWarning as FitWarning,
     Identification as Identification,
     fit_inertia as fit_inertia,
     identify as identify,
@@ -71,6 +72,7 @@ __all__ = [
     "Experiment",
     "FLUID_SCHEMES",
     "FitResult",
+    "FitWarning",
     "Fluid",
     "Identification",
     "IntegrationError",

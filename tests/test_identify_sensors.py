@@ -85,10 +85,31 @@ def test_summary_and_residual_figure(noise_free):
         if not name.startswith("q0["):
             assert name in text
     assert "unidentified: none" in text and "lag-1" in text and "q0[2] = [" in text
+    # The default scheme with its chart, and units a person reads (the legend defines [t] and [τ]).
+    assert "scheme rkmk_dopri5 (cayley chart)" in text
+    assert "inertia[0,0]" in text and "[τ]·[t]²" in text and "M L²" not in text
+    assert "sensors.gyro_delay" in text and " [t]" in text and "rad/[t]" in text and "units: [t]" in text
+    assert fit.reliable and fit.problems == () and "NOT RELIABLE" not in text
     figure = fit.plot_residuals()
     assert len(figure.axes) == 3 * 2  # experiments × sensors (tracker, gyro)
     titles = [ax.get_title() for ax in figure.axes]
     assert titles[0].startswith("experiment 0, tracker") and titles[-1].startswith("experiment 2, gyro")
+
+
+def test_a_scalar_gyro_scale_is_one_factor_for_the_three_axes():
+    from jaxrot._fit._identify._sensors import check_sensors
+
+    (sensor,) = check_sensors({"gyro_scale": 1.02}, [_gyro_experiment()])
+    assert not sensor.fitted
+    np.testing.assert_array_equal(sensor.value, [1.02, 1.02, 1.02])
+
+
+def test_the_summary_names_the_scheme_with_its_chart():
+    from jaxrot._fit._identify._report import scheme_label
+
+    assert scheme_label(jaxrot.schemes.RKMKDopri5(chart="cayley")) == "rkmk_dopri5 (cayley chart)"
+    assert scheme_label("rkmk_dopri5") == "rkmk_dopri5 (exp chart)"
+    assert scheme_label("zhao") == "zhao"
 
 
 def test_residual_statistics_tell_white_noise_from_a_model_error():
@@ -226,6 +247,11 @@ def _fit(experiments, **kwargs):
             lambda: _gyro_experiment(control=(np.arange(2.0), np.ones((2, 3))), control_hold="zoh"),
             "control_hold",
         ),
+        (
+            lambda: _gyro_experiment(control=(np.arange(2.0), np.ones((2, 2))), control_frame="body"),
+            r"\(2, 3\) of body-frame torques",
+        ),
+        (lambda: _fit(_gyro_experiment(), sensors={"gyro_scale": 0.0}), "nonzero"),  # a scalar: all axes
         (lambda: _gyro_experiment(args=[1.0]), "must be a dict"),
         (
             lambda: _fit(

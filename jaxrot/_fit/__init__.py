@@ -38,6 +38,7 @@ around an inner ``lax.scan``), so the memory of a gradient through ``N`` steps g
 
 from ._fit_inertia._fit_inertia import FitResult as FitResult, fit_inertia as fit_inertia
 from ._identify._experiment import Experiment as Experiment
+from ._identify._health import FitWarning as FitWarning
 from ._identify._identify import identify as identify
 from ._identify._result import Identification as Identification, StandardErrors as StandardErrors
 from ._initial import estimate_omega as estimate_omega

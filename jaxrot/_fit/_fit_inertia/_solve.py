@@ -83,5 +83,5 @@ def solve(params, model, free, *, adam_steps, adam_learning_rate, max_iter, ftol
     )
     n = int(n)
     x[free] = np.asarray(z, np.float64)
-    history.extend(np.asarray(gn_history[: n + 1], np.float64).tolist())
+    history.extend(np.asarray(gn_history, np.float64)[: n + 1].tolist())
     return Solution(_unflat(x, params, dtype), np.asarray(history), adam_steps + n, bool(converged))

@@ -197,11 +197,12 @@ class Experiment:
                 raise ValueError("`control` must be a pair (t_c (m,), tau_c (m, 3)) or None.")
             t_c = _array(control[0], "control[0]", "of control times (m,)", None)
             _times(t_c, "control[0]")
-            tau_c = _array(control[1], "control[1]", f"({t_c.shape[0]}, 3) of world-frame torques", 3)
+            frame = "body-frame" if control_frame == "body" else "world-frame"  # the samples' frame
+            tau_c = _array(control[1], "control[1]", f"({t_c.shape[0]}, 3) of {frame} torques", 3)
             if tau_c.shape[0] != t_c.shape[0] or not np.all(np.isfinite(tau_c)):
                 raise ValueError(
-                    f"`control[1]` must be finite world-frame torques ({t_c.shape[0]}, 3), one row per "
-                    f"control time; got shape {tau_c.shape}."
+                    f"`control[1]` must be finite {frame} torques ({t_c.shape[0]}, 3), one row per "
+                    f"control time (control_frame={control_frame!r}); got shape {tau_c.shape}."
                 )
             control = (t_c, tau_c)
         if control_frame not in CONTROL_FRAMES:

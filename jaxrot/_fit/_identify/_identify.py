@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from ...schemes import RKMKDopri5
 from ._check import check_arguments
 from ._experiment import Experiment
+from ._health import FitWarning, diagnose
 from ._problem import build_problem
 from ._result import Identification, result
 from ._solve import solve
@@ -139,7 +140,8 @@ def identify(
         rcond: singular-value ratio below which a direction is undetermined.
         sensors: a dict naming sensor parameters, each ``True`` (fitted from its ideal
             value) or an array (held there): ``"gyro_bias"`` ``(k, 3)`` one per
-            experiment [rad/time], ``"gyro_scale"`` ``(3,)`` [1], ``"gyro_delay"`` ``()``
+            experiment [rad/time], ``"gyro_scale"`` ``(3,)`` or one number for the three
+            axes [1], ``"gyro_delay"`` ``()``
             [time] (gyro reading ``= gyro_scale ⊙ ω_b(t − gyro_delay) + gyro_bias``),
             ``"tracker_mount"`` ``(3,)``, the rotation vector of the tracker's frame in
             the body frame [rad], and ``"tracker_delay"`` ``()`` [time] (tracker reading
@@ -148,9 +150,21 @@ def identify(
             Delays are relative to the controls' and the torque's clock: with neither,
             a common shift of both delays is undetermined and is reported so.
 
+    A failed fit is loud: when Gauss–Newton did not converge, its Jacobian was too
+    ill-conditioned for its own steps, or a sensor whose σ is given has whitened residuals far
+    above 1 (the model does not fit the data; thresholds argued in `_identify._health`),
+    ``identify`` warns with a `jaxrot.FitWarning`, the result has ``reliable`` False and its
+    ``problems``, the summary's first line says so and its standard errors are headed
+    "unreliable"; a fit that did not converge also names in ``unidentified`` the parameters
+    its next step would still move by more than their standard error.
+
     Returns:
         `Identification` (``summary()`` prints a report, ``plot_residuals()`` draws the
         whitened residuals).
+
+    Warns:
+        jaxrot.FitWarning: a fit that cannot be trusted (above), or parameters the data do not
+            determine (``unidentified``).
 
     Raises:
         ValueError: before any compilation, for a bad experiment, a ``free_args``
@@ -178,11 +192,26 @@ def identify(
     problem = build_problem(settings, start)
     solution = solve(problem, settings, start.speed)
     found = uncertainty(solution, settings)
-    if found.unidentified:
+    health = diagnose(settings, solution, found, problem.estimated)
+    if health.unsettled:
+        extra = tuple(name for name in health.unsettled if name not in found.unidentified)
+        found = found._replace(unidentified=found.unidentified + extra)
+    if health.problems:
+        names = ", ".join(health.unsettled)
+        moving = f", and unidentified names {names}, still moving" if health.unsettled else ""
+        warnings.warn(
+            f"identify: the fit cannot be trusted: {'; '.join(health.problems)}. Its standard errors are "
+            f"unreliable (Identification.reliable is False{moving}); fit.summary() shows the residuals of "
+            "each sensor.",
+            FitWarning,
+            stacklevel=2,
+        )
+    elif found.unidentified:
         warnings.warn(
             "identify: the data do not determine " + ", ".join(found.unidentified) + " (see "
             "Identification.unidentified; their standard errors are infinite where a combination of "
             "parameters is undetermined). Fix them, or add experiments or observations that excite them.",
+            FitWarning,
             stacklevel=2,
         )
-    return result(settings, problem, solution, found)
+    return result(settings, problem, solution, found, health.problems)

@@ -9,6 +9,9 @@ themselves look wrong.
 
 import numpy as np
 
+from ...schemes import resolve_scheme
+from ._sensors import TIME_UNIT, UNIT_LEGEND
+
 
 SENSOR_NAMES = {"q": "tracker", "omega_body": "gyro", "direction": "direction"}
 
@@ -37,6 +40,16 @@ def strongest_correlations(names, correlation, count=5):
     return [(names[i[o]], names[j[o]], float(c[i[o], j[o]])) for o in order]
 
 
+def scheme_label(scheme) -> str:
+    """A scheme's name with its chart where it has one: ``"rkmk_dopri5 (cayley chart)"``."""
+    try:
+        obj = resolve_scheme(scheme)
+    except ValueError:
+        return str(scheme)
+    chart = getattr(obj, "chart", None)
+    return obj.name + (f" ({chart} chart)" if chart is not None else "")
+
+
 def summary(fit) -> str:
     """The text of `Identification.summary`."""
     k = len(fit.trajectories)
@@ -44,17 +57,23 @@ def summary(fit) -> str:
         int(np.sum(np.all(np.isfinite(r), axis=-1))) * 3 for parts in fit.residuals for r in parts.values()
     )
     state = "converged" if fit.converged else "NOT converged (max_iter or a failed line search)"
-    lines = [
+    lines = []
+    if not fit.reliable:
+        lines.append("jaxrot.identify: FIT NOT RELIABLE, its standard errors are unreliable:")
+        lines += [f"  - {problem}" for problem in fit.problems]
+    lines += [
         f"jaxrot.identify: {k} experiment(s), {len(fit.names)} parameters, {state} after "
         f"{fit.n_iterations} iteration(s)",
         f"loss (sum of squared whitened residuals) {fit.loss:.6g} over {m} residuals; scheme "
-        f"{getattr(fit.scheme, 'name', fit.scheme)}, largest step {fit.dt:.3g}",
+        f"{scheme_label(fit.scheme)}, largest step {fit.dt:.3g}",
+        UNIT_LEGEND,
     ]
     if not fit.scale_determined:
         lines.append("no torque fixes the inertia's scale: it keeps the trace of inertia0 (shape only)")
     se = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
     width = max(len(name) for name in fit.names) if fit.names else 10
-    lines += ["", f"{'parameter':<{width}}  {'estimate':>14}  {'std. error':>10}  unit"]
+    error_head = "std. error" if fit.reliable else "unreliable"
+    lines += ["", f"{'parameter':<{width}}  {'estimate':>14}  {error_head:>10}  unit"]
     for name, value, error, unit in zip(fit.names, fit.estimates, se, fit.units, strict=True):
         if name.startswith("q0["):
             continue  # shown as quaternions below
@@ -63,7 +82,8 @@ def summary(fit) -> str:
     for j in range(k):
         rows = [i for i, name in enumerate(fit.names) if name.startswith(f"q0[{j}].")]
         q = ", ".join(f"{x:.8g}" for x in np.asarray(fit.q0[j], np.float64))
-        lines.append(f"q0[{j}] = [{q}]  ± {', '.join(f'{se[i]:.3g}' for i in rows)} rad (rotation)")
+        errors = ", ".join(f"{se[i]:.3g}" for i in rows) + ("" if fit.reliable else " (unreliable)")
+        lines.append(f"q0[{j}] = [{q}]  ± {errors} rad (rotation)")
     pairs = strongest_correlations(fit.names, fit.correlation)
     lines += ["", "strongest correlations:"]
     lines += [f"  {a} ~ {b}: {rho:+.3f}" for a, b, rho in pairs] or ["  (none)"]
@@ -106,7 +126,7 @@ def plot_residuals(fit):
             n, rms, lag = residual_statistics(parts[kind])
             ax.set_title(f"experiment {j}, {SENSOR_NAMES[kind]}: RMS {rms:.2f}, lag-1 {lag:+.2f}", fontsize=9)
             if j == k - 1:
-                ax.set_xlabel("time")
+                ax.set_xlabel(f"time {TIME_UNIT}")
             if c == 0:
                 ax.set_ylabel("residual / σ")
     axes[0, 0].legend(loc="upper right", fontsize=7, ncols=3)

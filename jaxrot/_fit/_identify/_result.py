@@ -51,8 +51,15 @@ class Identification(NamedTuple):
         correlation: the covariance as correlations ``(p, p)``.
         unidentified: labels of the parameters the data do not determine (an
             undetermined combination of the Jacobian's scaled columns moves them,
-            or their standard error exceeds their own size); empty when all are.
+            or their standard error exceeds their own size), and in a fit that did not
+            converge those its next Gauss–Newton step would still move by more than their
+            standard error; empty when all are determined.
         converged: Gauss–Newton stopped on its tolerance, not on ``max_iter``.
+        reliable: whether the standard errors can be trusted: the fit converged, its Jacobian
+            was usable by the optimiser, and every sensor with a given σ has a whitened RMS
+            near 1 (`problems` says what failed; `identify` then raises a `jaxrot.FitWarning`
+            and ``summary()`` says so on its first line).
+        problems: the failed checks, one sentence each (empty when ``reliable``).
         sigma: the noise level used per experiment and kind ``(k, 3)``
             (``q``, ``omega_body``, ``direction``), given or estimated; NaN where absent.
         residuals: per experiment, a dict of the whitened misfits ``(n, 3)`` of each
@@ -79,6 +86,8 @@ class Identification(NamedTuple):
     correlation: np.ndarray
     unidentified: tuple
     converged: bool
+    reliable: bool
+    problems: tuple
     sigma: np.ndarray
     residuals: list
     trajectories: list
@@ -116,7 +125,7 @@ class Identification(NamedTuple):
         return _report.plot_residuals(self)
 
 
-def result(settings, problem, solution, found) -> Identification:
+def result(settings, problem, solution, found, problems=()) -> Identification:
     """The `Identification` of a solved problem (`_solve.Solution`) and its `_uncertainty.Uncertainties`."""
     dtype = settings.dtype
     data = solution.model.data
@@ -157,6 +166,8 @@ def result(settings, problem, solution, found) -> Identification:
         correlation=correlations(found.covariance),
         unidentified=found.unidentified,
         converged=solution.converged,
+        reliable=not problems,
+        problems=tuple(problems),
         sigma=np.where(settings.counts > 0, sigma, np.nan),
         residuals=residual_dicts,
         trajectories=trajectories,

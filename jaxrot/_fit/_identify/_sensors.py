@@ -24,12 +24,20 @@ class SensorKind(NamedTuple):
     unit: str  # for the report
 
 
+# The report's units. identify has no unit system of its own: [t] is the unit of Experiment.t,
+# [τ] that of the torque model and the controls (so an inertia fixed by them is in [τ]·[t]²).
+TIME_UNIT = "[t]"
+RATE_UNIT = "rad/[t]"
+INERTIA_UNIT = "[τ]·[t]²"
+ARGS_UNIT = "(args')"  # the torque model's own units
+UNIT_LEGEND = "units: [t] of Experiment.t, [τ] of the torque model and controls, (args') the torque model's"
+
 SENSORS = {
-    "gyro_bias": SensorKind((3,), 0.0, "omega_body", True, "rad/time"),
+    "gyro_bias": SensorKind((3,), 0.0, "omega_body", True, RATE_UNIT),
     "gyro_scale": SensorKind((3,), 1.0, "omega_body", False, "1"),
-    "gyro_delay": SensorKind((), 0.0, "omega_body", False, "time"),
+    "gyro_delay": SensorKind((), 0.0, "omega_body", False, TIME_UNIT),
     "tracker_mount": SensorKind((3,), 0.0, "q", False, "rad"),
-    "tracker_delay": SensorKind((), 0.0, "q", False, "time"),
+    "tracker_delay": SensorKind((), 0.0, "q", False, TIME_UNIT),
 }
 
 
@@ -90,6 +98,8 @@ def check_sensors(sensors, experiments) -> tuple:
                 f"{given!r}. Leave the key out for an ideal sensor."
             )
         value = np.asarray(given, np.float64)
+        if name == "gyro_scale" and value.shape == ():
+            value = np.full(shape, value)  # one scale factor for the three axes
         if value.shape != shape or not np.all(np.isfinite(value)):
             what = "one row per experiment" if kind.per_experiment else "shared by the experiments"
             raise ValueError(

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._covariance import analyse, propagate
 from ._model import split, unpack
-from ._sensors import SENSORS, sensor_labels
+from ._sensors import ARGS_UNIT, INERTIA_UNIT, RATE_UNIT, SENSORS, sensor_labels
 
 
 ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
@@ -30,6 +30,9 @@ class Uncertainties(NamedTuple):
     unidentified: tuple
     fitted: tuple  # (inertia, args, q0, omega0, sensors) at the optimum
     stderr: tuple  # the same fields' standard errors (0 where held, inf where undetermined)
+    parameter_jacobian: np.ndarray  # (p, n) ∂(labelled parameters)/∂φ
+    kept: int  # directions of the column-scaled Jacobian the covariance keeps
+    raw_singular_values: np.ndarray  # of the unscaled Jacobian (the optimiser's view)
 
 
 def element_labels(base, shape):
@@ -68,26 +71,28 @@ def _labels(settings, fitted):
         units.extend([unit] * len(labels))
         scale.extend([size] * len(labels) if np.ndim(size) == 0 else list(size))
 
+    # Without a torque only the shape is determined, in the scale of inertia0's trace.
+    inertia_unit = "(shape only)" if settings.unit_scale else INERTIA_UNIT
     if settings.free_inertia is True:
-        add([f"inertia[{a},{b}]" for a, b in zip(*ELEMENTS, strict=True)], "M L²", inertia_scale)
+        add([f"inertia[{a},{b}]" for a, b in zip(*ELEMENTS, strict=True)], inertia_unit, inertia_scale)
     elif settings.free_inertia == "moments":
-        add([f"moments[{a}]" for a in range(3)], "M L²", inertia_scale)
+        add([f"moments[{a}]" for a in range(3)], inertia_unit, inertia_scale)
     leaves = jax.tree_util.tree_leaves(args)
     for index, leaf in enumerate(settings.leaves):
         if leaf.mode in ("free", "positive"):
-            add(element_labels(leaf.label, np.shape(leaves[index])), "args", _size(leaves[index]))
+            add(element_labels(leaf.label, np.shape(leaves[index])), ARGS_UNIT, _size(leaves[index]))
     for sensor in settings.sensors:
         if sensor.fitted and not sensor.kind.per_experiment:
             add(sensor_labels(sensor), sensor.kind.unit, _sensor_scale(sensor.name, settings, sensors))
     for j in range(settings.k):
         add([f"q0[{j}].rotation[{a}]" for a in range(3)], "rad", 1.0)
-        add([f"omega0[{j},{a}]" for a in range(3)], "rad/time", max(float(np.linalg.norm(omega0[j])), 1e-12))
+        add([f"omega0[{j},{a}]" for a in range(3)], RATE_UNIT, max(float(np.linalg.norm(omega0[j])), 1e-12))
         for index, leaf in enumerate(settings.leaves):
             if leaf.mode == "per_experiment":
                 value = np.asarray(leaves[index])[j]
                 labels = [f"{leaf.label}[{j}{',' if s else ''}{s}]" for s in
                           [",".join(map(str, i)) for i in np.ndindex(*np.shape(value))]]  # fmt: skip
-                add(labels, "args", _size(value))
+                add(labels, ARGS_UNIT, _size(value))
         for sensor in settings.sensors:
             if sensor.fitted and sensor.kind.per_experiment:
                 add(sensor_labels(sensor, j), sensor.kind.unit, _sensor_scale(sensor.name, settings, sensors))
@@ -171,4 +176,8 @@ def uncertainty(solution, settings) -> Uncertainties:
     )
     estimates = np.array(g_values, np.float64)
     estimates[[name.startswith("q0[") for name in names]] = 0.0  # rotations from the fitted q0
-    return Uncertainties(names, units, estimates, result.covariance, result.unidentified, fitted, stderr)
+    g = np.asarray(g, np.float64)
+    return Uncertainties(
+        names, units, estimates, result.covariance, result.unidentified, fitted, stderr, g, result.kept,
+        result.raw_singular_values,
+    )  # fmt: skip
