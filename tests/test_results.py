@@ -44,6 +44,8 @@ RESULTS = {
     # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
     "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
     "fluid_layer.json": (None, "python benchmarks/regenerate.py --only fluid_layer"),
+    # The fluid race: rows are jaxrot's fluid and overdamped schemes and diffrax's solvers.
+    "fluid_race_cpu.json": (None, "python benchmarks/regenerate.py --only fluid_race"),
     "overdamped_cost_cpu.json": (None, "python benchmarks/regenerate.py --only overdamped_cost"),
     # Bodies at a temperature: the thermal schemes and the peers, not jaxrot.SCHEMES.
     "thermal_orders.json": (None, "python benchmarks/regenerate.py --only thermal_orders"),
