@@ -173,7 +173,7 @@ JOBS = {
         ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),
         2,
     ),
-    "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 40, True),
+    "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 60, True),
 }
 
 
