@@ -3,215 +3,179 @@
 Every table and figure of README.md and the documentation site is rendered (by
 ``docs/_hooks/tables.py``) from a results file under ``docs/``, and each results file records
 the machine, the versions, the commit and the date it was measured on
-(`jaxrot.comparison.machine_info`). This script reruns the benchmarks that write them, one after
-another in fresh processes, so that nothing else competes for the cores while one is timed.
+(`jaxrot.comparison.machine_info`), and, once written through this script, the git blob hash of every
+source file its numbers depend on (``machine["sources"]``: the job's ``sources``) and what the rest of
+the machine computed meanwhile (``machine["load"]``). This script reruns the benchmarks that write them,
+one after another in fresh processes, printing its plan with each job's expected time first.
 
-    python benchmarks/regenerate.py --list              # the jobs, their files and rough times
-    python benchmarks/regenerate.py                     # all of them (about 2 h on 2 cores)
-    python benchmarks/regenerate.py --quick             # all but the long ones (races, compile, MuJoCo...)
+    python benchmarks/regenerate.py --list              # the jobs, their files, full and quick times
+    python benchmarks/regenerate.py --stale             # the results whose measured code has changed
     python benchmarks/regenerate.py --only memory,stability
+    python benchmarks/regenerate.py --only fluid_race --quick   # within 10 min, into quick/, not docs/
+    python benchmarks/regenerate.py                     # all of them (about 4 h on 2 cores)
+
+``--stale`` prints nothing and exits 0 when every result measures the code as it is now; otherwise it
+names each stale job, the command that reruns it and the files that changed, and exits 1.
+
+A timed result is only written when the machine was quiet: a job during which the rest of the machine
+used more than ``_harness.QUIET_OTHER_CORES`` cores on average leaves its files as they were and the
+script exits 1 (``--allow-load`` writes them, marked ``"allowed": true`` in their load block). Jobs
+marked ``timed=False`` (accuracy only) are written either way, with their load recorded.
 
 The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machine: the first were
 made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
-``benchmarks/gpu.sh``. The ``jax_md`` column of the throughput table needs
+``benchmarks/gpu.sh``; they are not jobs here. The ``jax_md`` column of the throughput table needs
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
 left out. The ``jax_md_rigid`` job needs ``.[jax_md]`` (Python 3.12); without it, it says so and
 leaves its file as it was: run it with ``--only jax_md_rigid --python <py312 venv>/bin/python``. The
 ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the
 repository root with a clean checkout: a results file made from uncommitted package or benchmark
-code carries ``+dirty`` in its commit.
+code carries ``+dirty`` in its commit (its source hashes still say what it measured).
 """
 
 import argparse
+import json
 import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
-from typing import NamedTuple
+
+import _harness
+from _jobs import JOBS, Job  # noqa: F401  (Job: for tests and callers)
 
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
 
-class Job(NamedTuple):
-    files: tuple[str, ...]  # under docs/
-    argv: tuple[str, ...]  # after the interpreter
-    minutes: float  # on this project's 2-core CPU
-    long: bool = False
-    # (file in the job's scratch folder ``{tmp}``, file under docs/) copied once the job has run
-    copies: tuple[tuple[str, str], ...] = ()
+def _minutes(job, quick):
+    return job.quick_minutes if quick and job.quick else job.minutes
 
 
-JOBS = {
-    "compare": Job(
-        ("compare_heavy_top.json", "compare_heavy_top.png"),
-        ("-m", "jaxrot", "compare", "--out", "{tmp}"),
-        4,
-        True,
-        (("compare.json", "compare_heavy_top.json"), ("compare.png", "compare_heavy_top.png")),
-    ),
-    "race64": Job(
-        ("race_cpu/race_float64.json",),
-        ("benchmarks/race.py", "--repeats", "3", "--time-cap", "1.0", "--out", "docs/race_cpu"),
-        31,
-        True,
-    ),
-    # Draws only: the headline figure of README and the home page, from race64's results.
-    "headline": Job(("headline.png",), ("benchmarks/headline.py",), 0.1),
-    "race32": Job(
-        ("race_cpu/race_float32.json",),
-        (
-            "benchmarks/race.py",
-            "--dtype",
-            "float32",
-            "--repeats",
-            "3",
-            "--time-cap",
-            "1.0",
-            "--out",
-            "docs/race_cpu",
-        ),
-        12,
-        True,
-    ),
-    "compile": Job(("compile_cpu.json",), ("benchmarks/compile.py",), 8, True),
-    "throughput": Job(
-        ("throughput_cpu.json",),
-        (
-            "benchmarks/throughput.py",
-            "--n",
-            "1000,10000,100000,1000000",
-            "--json",
-            "docs/throughput_cpu.json",
-        ),
-        12,
-    ),
-    # jax 0.10.2 (the default install of Python 3.11) beside the newest jax of the throughput job.
-    "throughput_jax010": Job(
-        ("throughput_cpu_jax010.json",),
-        (
-            "benchmarks/throughput.py",
-            "--n",
-            "1000,10000,100000,1000000",
-            "--dtype",
-            "float32,float64",
-            "--no-peer",
-            "--json",
-            "docs/throughput_cpu_jax010.json",
-        ),  # fmt: skip
-        9,
-    ),
-    # The same with XLA's default options instead of jaxrot.compiler_options(): the YNN trap.
-    "throughput_jax010_xla_defaults": Job(
-        ("throughput_cpu_jax010_xla_defaults.json",),
-        (
-            "benchmarks/throughput.py",
-            "--n",
-            "1000,10000,100000",
-            "--dtype",
-            "float64",
-            "--schemes",
-            "zhao,rozmanov,no_squish",
-            "--no-peer",
-            "--xla-defaults",
-            "--json",
-            "docs/throughput_cpu_jax010_xla_defaults.json",
-        ),  # fmt: skip
-        1.5,
-    ),
-    "memory": Job(("memory_cpu.json",), ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"), 5),
-    "stability": Job(
-        ("stability_cpu.json",), ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"), 5
-    ),
-    # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
-    "order4": Job(("order4.json",), ("benchmarks/order4.py", "--json", "docs/order4.json"), 9),
-    # Accuracy only: each scheme's float32 run against its float64 run (docs/stability.md).
-    "float32": Job(
-        ("float32_horizon.json",), ("benchmarks/float32.py", "--json", "docs/float32_horizon.json"), 12
-    ),
-    "identify_speed": Job(
-        ("identify_speed_cpu.json",),
-        ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
-        3,
-    ),
-    # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the
-    # benchmark says so and writes nothing).
-    "mujoco_free_body": Job(
-        ("mujoco_free_body_cpu.json", "mujoco_free_body_cpu.png"),
-        (
-            "benchmarks/mujoco_free_body.py",
-            "--json",
-            "docs/mujoco_free_body_cpu.json",
-            "--png",
-            "docs/mujoco_free_body_cpu.png",
-        ),
-        40,
-        True,
-    ),
-    # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
-    "thermal_orders": Job(
-        ("thermal_orders.json",), ("benchmarks/thermal_orders.py", "--bodies", "20000"), 15, True
-    ),
-    # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
-    "thermal_peers": Job(("thermal_peers.json",), ("benchmarks/thermal_peers.py", "--timing"), 25, True),
-    # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
-    # error, cost per body-step (Python 3.12 with jax_md: --python <venv312>/bin/python).
-    "jax_md_rigid": Job(("jax_md_cpu.json", "jax_md_cpu.png"), ("benchmarks/jax_md_rigid.py",), 20, True),
-    "rotor_choice": Job(
-        ("rotor_choice_cpu.json",),
-        ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
-        1.5,
-    ),
-    # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
-    "fluid_orders": Job(("fluid_orders.json",), ("benchmarks/fluid_orders.py",), 12),
-    "fluid_layer": Job(("fluid_layer.json",), ("benchmarks/fluid_layer.py",), 8),
-    "overdamped_cost": Job(
-        ("overdamped_cost_cpu.json",),
-        ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),
-        2,
-    ),
-    "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 60, True),
-}
+def print_plan(chosen, quick):
+    """The jobs about to run, each with its mode and expected time, and the total."""
+    total = sum(_minutes(JOBS[n], quick) for n in chosen)
+    print(f"== plan: {len(chosen)} job(s), about {total:.0f} min on 2 quiet cores", flush=True)
+    for name in chosen:
+        job = JOBS[name]
+        mode = "quick" if quick and job.quick else "full"
+        target = "quick/" if mode == "quick" else ", ".join(f"docs/{f}" for f in job.files)
+        print(f"   {name:31s} {mode:5s} ~{_minutes(job, quick):>4.1f} min -> {target}", flush=True)
 
 
-def run_job(name, job, python):
-    """Run one job; ``{tmp}`` in its argv is a scratch folder whose outputs are copied to ``docs/``."""
+def run_job(name, job, python, *, quick=False, allow_load=False):
+    """Run one job and return whether its results stand.
+
+    ``{tmp}`` in its argv is a scratch folder: its outputs are copied to ``docs/`` (or, in quick mode,
+    to ``quick/NAME/``, never to docs/). A timed job's files are restored to what they were when the
+    rest of the machine computed during the run, unless ``allow_load``; the files it writes record
+    their sources and the load either way.
+    """
+    quick = quick and job.quick is not None
+    targets = [DOCS / f for f in job.files]
+    before = {t: t.read_bytes() if t.exists() else None for t in targets}
     with tempfile.TemporaryDirectory() as tmp:
-        argv = [python, *(a.replace("{tmp}", tmp) for a in job.argv)]
-        print(f"== {name}: {' '.join(argv)}", flush=True)
-        start = time.perf_counter()
-        subprocess.run(argv, cwd=ROOT, check=True)
+        argv = [python, *(a.replace("{tmp}", tmp) for a in (job.quick if quick else job.argv))]
+        print(f"== {name}{' (quick)' if quick else ''}: {' '.join(argv)}", flush=True)
+        with _harness.LoadWatch() as watch:
+            subprocess.run(argv, cwd=ROOT, check=True)
+        load = watch.record
+        if quick:
+            out = ROOT / "quick" / name
+            shutil.rmtree(out, ignore_errors=True)
+            shutil.copytree(tmp, out)
+            for path in out.glob("*.json"):
+                _harness.annotate(path, job.sources, load)
+            print(f"== {name} (quick): {load['seconds'] / 60:.1f} min; its files in {out}", flush=True)
+            return True
         for source, target in job.copies:
             shutil.copy(Path(tmp) / source, DOCS / target)
+    busy = job.timed and load["quiet"] is False
+    if busy and not allow_load:
+        for target, content in before.items():
+            if content is None:
+                target.unlink(missing_ok=True)
+            else:
+                target.write_bytes(content)
         print(
-            f"== {name}: {(time.perf_counter() - start) / 60:.1f} min; wrote {', '.join(job.files)}",
+            f"== {name}: NOT WRITTEN: the rest of the machine used {load['other_cores']} cores on average "
+            f"during this timed run (quiet: <= {_harness.QUIET_OTHER_CORES}; load average "
+            f"{load['loadavg_before'][0]} before, {load['loadavg_after'][0]} after). Rerun on quiet cores, "
+            "or pass --allow-load to write it marked as measured under load.",
             flush=True,
         )
+        return False
+    for target in targets:
+        if target.suffix == ".json":
+            _harness.annotate(target, job.sources, {**load, "allowed": busy})
+    print(
+        f"== {name}: {load['seconds'] / 60:.1f} min, others {load['other_cores']} cores"
+        f"{' (UNDER LOAD, allowed)' if busy else ''}; wrote {', '.join(job.files)}",
+        flush=True,
+    )
+    return True
+
+
+def stale_jobs(names=None):
+    """``{job: [reasons]}`` for the jobs whose results files measure code that has changed since."""
+    stale = {}
+    for name in names or JOBS:
+        job = JOBS[name]
+        for f in job.files:
+            path = DOCS / f
+            if path.suffix != ".json" or not path.exists():
+                continue
+            machine = json.loads(path.read_text()).get("machine")
+            if not isinstance(machine, dict):
+                continue
+            reasons = _harness.stale_sources(machine, job.sources)
+            if reasons:
+                stale.setdefault(name, []).extend(f"docs/{f}: {r}" for r in reasons)
+    return stale
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", default=None, help=f"comma-separated jobs of {list(JOBS)}")
-    parser.add_argument("--quick", action="store_true", help="skip the long jobs")
+    parser.add_argument(
+        "--quick", action="store_true", help="each job in its quick form where it has one (into quick/)"
+    )
     parser.add_argument("--list", action="store_true", help="list the jobs and exit")
+    parser.add_argument(
+        "--stale", action="store_true", help="list the results whose measured code changed; exit 1 if any"
+    )
+    parser.add_argument(
+        "--allow-load", action="store_true", help="write timed results measured beside other computation"
+    )
     parser.add_argument("--python", default=sys.executable, help="interpreter for the benchmarks")
     opts = parser.parse_args(argv)
     if opts.list:
         for name, job in JOBS.items():
             files = ", ".join(f"docs/{f}" for f in job.files)
-            print(f"{name:15s} ~{job.minutes:>3.0f} min {'long' if job.long else '':5s} {files}")
+            quick = f"quick ~{job.quick_minutes:>2.0f}" if job.quick else " " * 8
+            print(f"{name:31s} ~{job.minutes:>3.0f} min {quick} {'timed' if job.timed else '     '} {files}")
         return 0
-    chosen = (
-        opts.only.split(",") if opts.only else [n for n, j in JOBS.items() if not (opts.quick and j.long)]
-    )
+    chosen = opts.only.split(",") if opts.only else list(JOBS)
     unknown = [n for n in chosen if n not in JOBS]
     if unknown:
         parser.error(f"unknown jobs {unknown}; known: {list(JOBS)}")
-    for name in chosen:
-        run_job(name, JOBS[name], opts.python)
+    if opts.stale:
+        stale = stale_jobs(chosen)
+        for name, reasons in stale.items():
+            print(f"{name}: python benchmarks/regenerate.py --only {name}")
+            for reason in reasons:
+                print(f"    {reason}")
+        return 1 if stale else 0
+    print_plan(chosen, opts.quick)
+    refused = [
+        n
+        for n in chosen
+        if not run_job(n, JOBS[n], opts.python, quick=opts.quick, allow_load=opts.allow_load)
+    ]
+    if refused:
+        print(f"== not written (the machine was busy): {', '.join(refused)}", flush=True)
+        return 1
     return 0
 
 

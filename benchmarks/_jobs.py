@@ -1,0 +1,332 @@
+"""The jobs of `regenerate.py`: each benchmark's command, the results files it writes, its expected
+time (full and quick) and the sources its numbers depend on."""
+
+from typing import NamedTuple
+
+
+class Job(NamedTuple):
+    files: tuple[str, ...]  # under docs/
+    argv: tuple[str, ...]  # after the interpreter
+    minutes: float  # on this project's 2-core CPU, quiet
+    long: bool = False  # past the 10 minutes a rerun during development may take
+    # (file in the job's scratch folder ``{tmp}``, file under docs/) copied once the job has run
+    copies: tuple[tuple[str, str], ...] = ()
+    # The same benchmark at reduced sizes (its outputs in the scratch folder ``{tmp}``, which
+    # ``--quick`` keeps under quick/), for a rerun within 10 minutes; the full run stays for docs/.
+    quick: tuple[str, ...] | None = None
+    quick_minutes: float | None = None
+    # Repository paths (files or folders) its numbers depend on: a change there makes it stale.
+    sources: tuple[str, ...] = ()
+    timed: bool = True  # its figures are timings: refused unless measured on quiet cores
+
+
+# The package code behind the numbers, by concept (see README's layout); each job names the groups
+# it measures and its own script.
+BASE = (
+    "jaxrot/_core",
+    "jaxrot/quaternion.py",
+    "jaxrot/_state.py",
+    "jaxrot/_inertia.py",
+    "jaxrot/_particles.py",
+    "jaxrot/_validation.py",
+    "jaxrot/torques.py",
+    "jaxrot/_integrate",
+    "jaxrot/schemes/__init__.py",
+    "jaxrot/schemes/_base.py",
+    "jaxrot/comparison/_timing.py",
+)
+ROTOR = ("jaxrot/_free_body",)
+VACUUM = (
+    *ROTOR,
+    *(
+        f"jaxrot/schemes/{name}.py"
+        for name in (
+            "_charts _lie_runge_kutta _rkn_splitting zhao rozmanov euler no_squish splitting rkmk4 "
+            "rkmk_dopri5 rkmk_dopri8 srkn6b srkn14a"
+        ).split()
+    ),
+)
+FLUID = (
+    "jaxrot/_fluid",
+    "jaxrot/comparison/_fluid.py",
+    *(f"jaxrot/schemes/{name}.py" for name in "_exponential _phi _overdamped exp_midpoint exp_rk4".split()),
+)
+THERMAL = (
+    *ROTOR,
+    "jaxrot/comparison/_thermal.py",
+    "jaxrot/comparison/_thermal_problems.py",
+    "jaxrot/comparison/_weak.py",
+    *(
+        f"jaxrot/schemes/{name}.py"
+        for name in "_langevin _ou _noise _brownian _heat_kernel baoab exp_euler".split()
+    ),
+)
+DIFFRAX = ("jaxrot/_diffrax",)
+SCENES = ("jaxrot/scenes", "jaxrot/analytic.py")
+FIT = ("jaxrot/_fit", "tests/_telemetry.py")
+
+
+JOBS = {
+    "compare": Job(
+        ("compare_heavy_top.json", "compare_heavy_top.png"),
+        ("-m", "jaxrot", "compare", "--out", "{tmp}"),
+        4,
+        copies=(("compare.json", "compare_heavy_top.json"), ("compare.png", "compare_heavy_top.png")),
+        sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "jaxrot/comparison/_ladder.py", "jaxrot/__main__.py"),
+    ),
+    "race64": Job(
+        ("race_cpu/race_float64.json",),
+        ("benchmarks/race.py", "--repeats", "3", "--time-cap", "1.0", "--out", "docs/race_cpu"),
+        31,
+        True,
+        quick=("benchmarks/race.py", "--n", "200", "--repeats", "1", "--time-cap", "0.5", "--out", "{tmp}"),
+        quick_minutes=8,
+        sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/race.py"),
+    ),
+    # Draws only: the headline figure of README and the home page, from race64's results.
+    "headline": Job(("headline.png",), ("benchmarks/headline.py",), 0.1, timed=False),
+    "race32": Job(
+        ("race_cpu/race_float32.json",),
+        (
+            "benchmarks/race.py",
+            "--dtype",
+            "float32",
+            "--repeats",
+            "3",
+            "--time-cap",
+            "1.0",
+            "--out",
+            "docs/race_cpu",
+        ),
+        12,
+        True,
+        quick=(
+            "benchmarks/race.py",
+            "--dtype",
+            "float32",
+            "--n",
+            "200",
+            "--repeats",
+            "1",
+            "--time-cap",
+            "0.5",
+            "--out",
+            "{tmp}",
+        ),
+        quick_minutes=4,
+        sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/race.py"),
+    ),
+    "compile": Job(
+        ("compile_cpu.json",),
+        ("benchmarks/compile.py",),
+        8,
+        sources=(*BASE, *VACUUM, "benchmarks/compile.py"),
+    ),
+    "throughput": Job(
+        ("throughput_cpu.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000,1000000",
+            "--json",
+            "docs/throughput_cpu.json",
+        ),
+        12,
+        True,
+        quick=(
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000",
+            "--repeats",
+            "1",
+            "--json",
+            "{tmp}/throughput_cpu.json",
+        ),
+        quick_minutes=3,
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
+    ),
+    # jax 0.10.2 (the default install of Python 3.11) beside the newest jax of the throughput job.
+    "throughput_jax010": Job(
+        ("throughput_cpu_jax010.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000,1000000",
+            "--dtype",
+            "float32,float64",
+            "--no-peer",
+            "--json",
+            "docs/throughput_cpu_jax010.json",
+        ),  # fmt: skip
+        9,
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
+    ),
+    # The same with XLA's default options instead of jaxrot.compiler_options(): the YNN trap.
+    "throughput_jax010_xla_defaults": Job(
+        ("throughput_cpu_jax010_xla_defaults.json",),
+        (
+            "benchmarks/throughput.py",
+            "--n",
+            "1000,10000,100000",
+            "--dtype",
+            "float64",
+            "--schemes",
+            "zhao,rozmanov,no_squish",
+            "--no-peer",
+            "--xla-defaults",
+            "--json",
+            "docs/throughput_cpu_jax010_xla_defaults.json",
+        ),  # fmt: skip
+        1.5,
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
+    ),
+    "memory": Job(
+        ("memory_cpu.json",),
+        ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"),
+        5,
+        sources=(*BASE, *VACUUM, "benchmarks/memory.py", "benchmarks/throughput.py"),
+    ),
+    # Accuracy only: the largest safe step, blow-up and long-run drift of every scheme.
+    "stability": Job(
+        ("stability_cpu.json",),
+        ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"),
+        5,
+        sources=(*BASE, *VACUUM, "jaxrot/stability.py", "benchmarks/stability.py"),
+        timed=False,
+    ),
+    # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
+    "order4": Job(
+        ("order4.json",),
+        ("benchmarks/order4.py", "--json", "docs/order4.json"),
+        9,
+        sources=(*BASE, *VACUUM, "benchmarks/order4.py"),
+        timed=False,
+    ),
+    # Accuracy only: each scheme's float32 run against its float64 run (docs/stability.md).
+    "float32": Job(
+        ("float32_horizon.json",),
+        ("benchmarks/float32.py", "--json", "docs/float32_horizon.json"),
+        12,
+        True,
+        quick=("benchmarks/float32.py", "--steps", "20000", "--json", "{tmp}/float32_horizon.json"),
+        quick_minutes=3,
+        sources=(*BASE, *VACUUM, *DIFFRAX, "benchmarks/float32.py"),
+        timed=False,
+    ),
+    "identify_speed": Job(
+        ("identify_speed_cpu.json",),
+        ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
+        3,
+        sources=(*BASE, *VACUUM, *DIFFRAX, *FIT, "benchmarks/identify_speed.py"),
+    ),
+    # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the
+    # benchmark says so and writes nothing).
+    "mujoco_free_body": Job(
+        ("mujoco_free_body_cpu.json", "mujoco_free_body_cpu.png"),
+        (
+            "benchmarks/mujoco_free_body.py",
+            "--json",
+            "docs/mujoco_free_body_cpu.json",
+            "--png",
+            "docs/mujoco_free_body_cpu.png",
+        ),
+        40,
+        True,
+        quick=(
+            "benchmarks/mujoco_free_body.py",
+            "--n",
+            "200",
+            "--max-steps",
+            "8192",
+            "--repeats",
+            "2",
+            "--json",
+            "{tmp}/mujoco_free_body_cpu.json",
+        ),
+        quick_minutes=8,
+        sources=(*BASE, *VACUUM, "benchmarks/mujoco_free_body.py"),
+    ),
+    # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
+    "thermal_orders": Job(
+        ("thermal_orders.json",),
+        ("benchmarks/thermal_orders.py", "--bodies", "20000"),
+        15,
+        True,
+        quick=("benchmarks/thermal_orders.py", "--quick", "--out", "{tmp}/thermal_orders.json"),
+        quick_minutes=3,
+        sources=(*BASE, *THERMAL, *FLUID, "benchmarks/thermal_orders.py"),
+        timed=False,
+    ),
+    # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
+    "thermal_peers": Job(
+        ("thermal_peers.json",),
+        ("benchmarks/thermal_peers.py", "--timing"),
+        25,
+        True,
+        quick=("benchmarks/thermal_peers.py", "--quick", "--out", "{tmp}/thermal_peers.json"),
+        quick_minutes=3,
+        sources=(*BASE, *THERMAL, *FLUID, *DIFFRAX, "benchmarks/thermal_peers.py"),
+    ),
+    # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
+    # error, cost per body-step (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    "jax_md_rigid": Job(
+        ("jax_md_cpu.json", "jax_md_cpu.png"),
+        ("benchmarks/jax_md_rigid.py",),
+        20,
+        True,
+        quick=("benchmarks/jax_md_rigid.py", "--quick", "--out", "{tmp}/jax_md_cpu.json"),
+        quick_minutes=3,
+        sources=(*BASE, *VACUUM, *THERMAL, *FLUID, "jaxrot/jax_md", "benchmarks/jax_md_rigid.py"),
+    ),
+    "rotor_choice": Job(
+        ("rotor_choice_cpu.json",),
+        ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
+        1.5,
+        sources=(*BASE, *ROTOR, "benchmarks/rotor.py"),
+    ),
+    # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
+    "fluid_orders": Job(
+        ("fluid_orders.json",),
+        ("benchmarks/fluid_orders.py",),
+        12,
+        True,
+        quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
+        quick_minutes=3,
+        sources=(*BASE, *VACUUM, *FLUID, "benchmarks/fluid_orders.py"),
+        timed=False,
+    ),
+    "fluid_layer": Job(
+        ("fluid_layer.json",),
+        ("benchmarks/fluid_layer.py",),
+        8,
+        sources=(*BASE, *FLUID, "benchmarks/fluid_layer.py"),
+        timed=False,
+    ),
+    "overdamped_cost": Job(
+        ("overdamped_cost_cpu.json",),
+        ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),
+        2,
+        sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/overdamped_cost.py"),
+    ),
+    "fluid_race": Job(
+        ("fluid_race_cpu.json", "fluid_race_cpu.png"),
+        ("benchmarks/fluid_race.py",),
+        60,
+        True,
+        quick=(
+            "benchmarks/fluid_race.py",
+            "--n",
+            "200",
+            "--repeats",
+            "1",
+            "--rounds",
+            "3",
+            "--stokes",
+            "0.1",
+            "--out",
+            "{tmp}",
+        ),
+        quick_minutes=8,
+        sources=(*BASE, *VACUUM, *FLUID, *DIFFRAX, *SCENES, "benchmarks/fluid_race.py", "benchmarks/race.py"),
+    ),
+}

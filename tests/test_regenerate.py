@@ -1,0 +1,131 @@
+"""The benchmarks' harness (benchmarks/regenerate.py, benchmarks/_harness.py): stale results, the load
+guard, the plan. Everything here runs in a scratch folder standing for docs/; nothing is timed."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import _harness  # noqa: E402
+import regenerate  # noqa: E402
+
+
+def test_fingerprint_ignores_docstrings_comments_and_layout_but_not_code():
+    code = 'def f(x):\n    """Twice x."""\n    return 2 * x\n'
+    same = "def f(x):  # why: a comment\n\n    return 2*x\n"
+    other = 'def f(x):\n    """Twice x."""\n    return 3 * x\n'
+    assert _harness.fingerprint("m.py", code) == _harness.fingerprint("m.py", same)
+    assert _harness.fingerprint("m.py", code) != _harness.fingerprint("m.py", other)
+    # Other files are hashed as they are.
+    assert _harness.fingerprint("a.json", "{}") != _harness.fingerprint("a.json", "{ }")
+
+
+def test_every_job_names_existing_sources_and_quick_forms_write_to_scratch():
+    for name, job in regenerate.JOBS.items():
+        if job.files[0].endswith(".json"):
+            assert job.sources, f"{name}: no sources, so --stale could never call it stale"
+        files = _harness.source_files(job.sources)
+        missing = [s for s in job.sources if not any(f == s or f.startswith(s + "/") for f in files)]
+        assert not missing, f"{name}: sources {missing} do not exist"
+        if job.quick is not None:
+            assert job.quick_minutes is not None and job.quick_minutes <= 10, name
+            assert not any("docs/" in a for a in job.quick), f"{name}: its quick form writes to docs/"
+        if job.minutes > 10:
+            assert job.quick is not None, f"{name}: over 10 minutes without a quick form"
+
+
+def test_stale_sources_names_the_changed_file():
+    sources = ("benchmarks/_harness.py", "benchmarks/regenerate.py")
+    machine = {"sources": _harness.source_hashes(sources)}
+    assert _harness.stale_sources(machine, sources) == []
+    machine["sources"]["benchmarks/_harness.py"] = "0" * 16
+    (reason,) = _harness.stale_sources(machine, sources)
+    assert "benchmarks/_harness.py" in reason and "regenerate.py" not in reason
+    # A file written before fingerprints were recorded is judged by its commit; one from
+    # uncommitted code cannot be judged, and says so.
+    assert "uncommitted" in _harness.stale_sources({"commit": "0123abcd+dirty"}, sources)[0]
+    assert "not in this repository" in _harness.stale_sources({"commit": "0" * 12}, sources)[0]
+
+
+class _Watch:
+    """A LoadWatch that reports a given verdict (the real one is tested below)."""
+
+    quiet = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.record = {
+            "loadavg_before": [0.0] * 3,
+            "loadavg_after": [0.0] * 3,
+            "job_cores": 1.0,
+            "other_cores": 0.0 if self.quiet else 1.0,
+            "seconds": 0.1,
+            "quiet": self.quiet,
+        }
+        return False
+
+
+@pytest.fixture
+def scratch_docs(tmp_path, monkeypatch):
+    monkeypatch.setattr(regenerate, "DOCS", tmp_path)
+    (tmp_path / "r.json").write_text(json.dumps({"machine": {"commit": "old"}, "rows": [1]}, indent=1))
+    writer = f"import json, pathlib; pathlib.Path({str(tmp_path / 'r.json')!r}).write_text(json.dumps("
+    writer += "{'machine': {'commit': 'new'}, 'rows': [2]}, indent=1))"
+    return regenerate.Job(("r.json",), ("-c", writer), 0.01, sources=("benchmarks/_harness.py",))
+
+
+@pytest.mark.parametrize("timed", [True, False])
+def test_a_busy_machine_leaves_timed_results_as_they_were(scratch_docs, monkeypatch, timed, capsys):
+    job = scratch_docs._replace(timed=timed)
+    monkeypatch.setattr(_Watch, "quiet", False)
+    monkeypatch.setattr(_harness, "LoadWatch", _Watch)
+    written = regenerate.run_job("r", job, sys.executable)
+    data = json.loads((regenerate.DOCS / "r.json").read_text())
+    if timed:
+        assert not written and data["rows"] == [1] and "NOT WRITTEN" in capsys.readouterr().out
+    else:  # accuracy only: written, with its load recorded
+        assert written and data["rows"] == [2] and data["machine"]["load"]["quiet"] is False
+    # --allow-load writes it, marked.
+    assert regenerate.run_job("r", job, sys.executable, allow_load=True)
+    data = json.loads((regenerate.DOCS / "r.json").read_text())
+    assert data["rows"] == [2] and data["machine"]["load"]["allowed"] is timed
+    assert data["machine"]["sources"] == _harness.source_hashes(job.sources)
+
+
+def test_a_quiet_run_is_written_with_its_sources_and_is_then_current(scratch_docs, monkeypatch):
+    monkeypatch.setattr(_harness, "LoadWatch", _Watch)
+    monkeypatch.setitem(regenerate.JOBS, "r", scratch_docs)
+    assert regenerate.run_job("r", scratch_docs, sys.executable)
+    machine = json.loads((regenerate.DOCS / "r.json").read_text())["machine"]
+    assert machine["load"]["quiet"] is True and machine["load"]["allowed"] is False
+    assert regenerate.stale_jobs(["r"]) == {}
+
+
+def test_load_watch_sees_another_process_compute():
+    """A busy loop outside the job shows as other cores; the job's own sleep does not."""
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.2)  # it has started
+        with _harness.LoadWatch() as watch:
+            subprocess.run([sys.executable, "-c", "import time; time.sleep(0.6)"], check=True)
+    finally:
+        busy.kill()
+        busy.wait()
+    record = watch.record
+    # The loop holds a core unless the machine is oversubscribed three times over: >= 1/3 of one.
+    assert record["other_cores"] >= 0.33 and record["quiet"] is False, record
+    assert record["job_cores"] < 0.33, record  # a sleeping job (and the interpreter's start)
+
+
+def test_plan_lists_each_job_with_its_time(capsys):
+    regenerate.print_plan(["fluid_race", "memory"], quick=True)
+    out = capsys.readouterr().out
+    assert "2 job(s)" in out and "fluid_race" in out and "quick" in out and "memory" in out
