@@ -18,6 +18,9 @@ class Job(NamedTuple):
     # Repository paths (files or folders) its numbers depend on: a change there makes it stale.
     sources: tuple[str, ...] = ()
     timed: bool = True  # its figures are timings: refused unless measured on quiet cores
+    # The docs tables (names in docs/_hooks/tables.py's TABLES) that carry its headline figures:
+    # a quick run prints each from its own files beside the published one.
+    tables: tuple[str, ...] = ()
 
 
 # The package code behind the numbers, by concept (see README's layout); each job names the groups
@@ -81,6 +84,7 @@ JOBS = {
         True,
         quick=("benchmarks/race.py", "--n", "200", "--repeats", "1", "--time-cap", "0.5", "--out", "{tmp}"),
         quick_minutes=8,
+        tables=("race_table_float64",),
         sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/race.py"),
     ),
     # Draws only: the headline figure of README and the home page, from race64's results.
@@ -114,6 +118,7 @@ JOBS = {
             "{tmp}",
         ),
         quick_minutes=4,
+        tables=("race_table_float32",),
         sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/race.py"),
     ),
     "compile": Job(
@@ -143,6 +148,7 @@ JOBS = {
             "{tmp}/throughput_cpu.json",
         ),
         quick_minutes=3,
+        tables=("throughput_table",),
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
     ),
     # jax 0.10.2 (the default install of Python 3.11) beside the newest jax of the throughput job.
@@ -210,6 +216,7 @@ JOBS = {
         True,
         quick=("benchmarks/float32.py", "--steps", "20000", "--json", "{tmp}/float32_horizon.json"),
         quick_minutes=3,
+        tables=("float32_horizon_table",),
         sources=(*BASE, *VACUUM, *DIFFRAX, "benchmarks/float32.py"),
         timed=False,
     ),
@@ -244,6 +251,7 @@ JOBS = {
             "{tmp}/mujoco_free_body_cpu.json",
         ),
         quick_minutes=8,
+        tables=("mujoco_free_body_speed",),
         sources=(*BASE, *VACUUM, "benchmarks/mujoco_free_body.py"),
     ),
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
@@ -254,6 +262,7 @@ JOBS = {
         True,
         quick=("benchmarks/thermal_orders.py", "--quick", "--out", "{tmp}/thermal_orders.json"),
         quick_minutes=3,
+        tables=("thermal_orders_table",),
         sources=(*BASE, *THERMAL, *FLUID, "benchmarks/thermal_orders.py"),
         timed=False,
     ),
@@ -265,6 +274,7 @@ JOBS = {
         True,
         quick=("benchmarks/thermal_peers.py", "--quick", "--out", "{tmp}/thermal_peers.json"),
         quick_minutes=3,
+        tables=("thermal_peers_table",),
         sources=(*BASE, *THERMAL, *FLUID, *DIFFRAX, "benchmarks/thermal_peers.py"),
     ),
     # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
@@ -276,6 +286,10 @@ JOBS = {
         True,
         quick=("benchmarks/jax_md_rigid.py", "--quick", "--out", "{tmp}/jax_md_cpu.json"),
         quick_minutes=3,
+        tables=(
+            "jax_md_cost_table",
+            "jax_md_temperature_table",
+        ),
         sources=(*BASE, *VACUUM, *THERMAL, *FLUID, "jaxrot/jax_md", "benchmarks/jax_md_rigid.py"),
     ),
     "rotor_choice": Job(
@@ -292,6 +306,7 @@ JOBS = {
         True,
         quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
         quick_minutes=3,
+        tables=("fluid_orders_table",),
         sources=(*BASE, *VACUUM, *FLUID, "benchmarks/fluid_orders.py"),
         timed=False,
     ),
@@ -327,6 +342,7 @@ JOBS = {
             "{tmp}",
         ),
         quick_minutes=8,
+        tables=("fluid_race_table",),
         sources=(*BASE, *VACUUM, *FLUID, *DIFFRAX, *SCENES, "benchmarks/fluid_race.py", "benchmarks/race.py"),
     ),
 }

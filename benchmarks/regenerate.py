@@ -85,9 +85,15 @@ def run_job(name, job, python, *, quick=False, allow_load=False):
             out = ROOT / "quick" / name
             shutil.rmtree(out, ignore_errors=True)
             shutil.copytree(tmp, out)
-            for path in out.glob("*.json"):
+            # Laid out as under docs/, so that the docs' tables render from it.
+            for f in job.files:
+                if (out / Path(f).name).exists() and Path(f).name != f:
+                    (out / f).parent.mkdir(parents=True, exist_ok=True)
+                    shutil.copy(out / Path(f).name, out / f)
+            for path in out.rglob("*.json"):
                 _harness.annotate(path, job.sources, load)
             print(f"== {name} (quick): {load['seconds'] / 60:.1f} min; its files in {out}", flush=True)
+            compare_tables(job, out)
             return True
         for source, target in job.copies:
             shutil.copy(Path(tmp) / source, DOCS / target)
@@ -115,6 +121,24 @@ def run_job(name, job, python, *, quick=False, allow_load=False):
         flush=True,
     )
     return True
+
+
+def compare_tables(job, quick_docs):
+    """Print each headline table of ``job`` as published (docs/) and as its quick run gives it."""
+    if not job.tables:
+        return
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_docs_tables", DOCS / "_hooks" / "tables.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    for table in job.tables:
+        for label, docs in (("published", DOCS), ("quick", quick_docs)):
+            try:
+                text = hooks.TABLES[table](docs)
+            except (OSError, KeyError, ValueError) as error:  # the quick form wrote no such file
+                text = f"(not rendered: {type(error).__name__}: {error})"
+            print(f"-- {table}, {label}:\n{text}\n", flush=True)
 
 
 def stale_jobs(names=None):

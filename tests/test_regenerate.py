@@ -38,6 +38,25 @@ def test_every_job_names_existing_sources_and_quick_forms_write_to_scratch():
             assert not any("docs/" in a for a in job.quick), f"{name}: its quick form writes to docs/"
         if job.minutes > 10:
             assert job.quick is not None, f"{name}: over 10 minutes without a quick form"
+        unknown = set(job.tables) - set(_docs_tables().TABLES)
+        assert not unknown, f"{name}: no docs tables {unknown}"
+
+
+def _docs_tables():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_docs_tables", regenerate.DOCS / "_hooks" / "tables.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_quick_run_prints_its_headline_tables_beside_the_published_ones(tmp_path, capsys):
+    job = regenerate.JOBS["fluid_race"]
+    regenerate.compare_tables(job, tmp_path)  # an empty quick folder: the quick side is not rendered
+    out = capsys.readouterr().out
+    assert "-- fluid_race_table, published:\n|" in out
+    assert "-- fluid_race_table, quick:\n*Not measured yet" in out
 
 
 def test_stale_sources_names_the_changed_file():
