@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 
+import jax
 import pytest
 
 
@@ -43,14 +44,32 @@ def _marks(block):
     return marks
 
 
+def _example_env():
+    """The suite's compile settings (conftest.py) without its four fake devices, which a block that sets
+    its own device count would contradict: the examples' programs mean the same at any optimisation
+    level. And the suite's persistent compilation cache: most blocks repeat the README's first example
+    (its rollout and its diffrax reference), and load those programs instead of compiling them again."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if "device_count" not in f]
+    if flags:
+        env["XLA_FLAGS"] = " ".join(flags)
+    cache = jax.config.jax_compilation_cache_dir
+    if cache:
+        env["JAX_COMPILATION_CACHE_DIR"] = str(cache)
+        env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+        env["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "0"
+    return env
+
+
 @pytest.mark.parametrize(
     "code",
     [pytest.param(b, marks=_marks(b)) for b in RUNNABLE],
     ids=[b.splitlines()[-1][:40] for b in RUNNABLE],
 )
 def test_readme_example_runs(code, tmp_path):
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, env=_example_env(), capture_output=True, text=True
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     if "sharding.spec" in code:
         assert "(None, 'p')" in out.stdout
