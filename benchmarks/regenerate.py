@@ -174,6 +174,22 @@ JOBS = {
         2,
     ),
     "fluid_race": Job(("fluid_race_cpu.json", "fluid_race_cpu.png"), ("benchmarks/fluid_race.py",), 60, True),
+    "fluid_step_cost": Job(
+        ("fluid_step_cost_cpu.json",),
+        ("benchmarks/fluid_step_cost.py", "--json", "docs/fluid_step_cost_cpu.json"),
+        3,
+        quick=("benchmarks/fluid_step_cost.py", "--n", "200", "--steps", "50", "--rounds", "3"),
+        sources=(
+            "benchmarks/fluid_step_cost.py",
+            "jaxrot/schemes/_exponential.py",
+            "jaxrot/schemes/exp_rk4.py",
+            "jaxrot/schemes/exp_midpoint.py",
+            "jaxrot/schemes/_lie_runge_kutta.py",
+            "jaxrot/schemes/rkmk4.py",
+            "jaxrot/schemes/_charts.py",
+            "jaxrot/_fluid/",
+        ),
+    ),
 }
 
 
