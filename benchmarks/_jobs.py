@@ -352,4 +352,24 @@ JOBS = {
         tables=("fluid_race_table",),
         sources=(*BASE, *VACUUM, *FLUID, *DIFFRAX, *SCENES, "benchmarks/fluid_race.py", "benchmarks/race.py"),
     ),
+    # One exponential step in the race's fluid against a Lie-group Runge-Kutta step with the same physics
+    # as a torque (docs/fluid.md).
+    "fluid_step_cost": Job(
+        ("fluid_step_cost_cpu.json",),
+        ("benchmarks/fluid_step_cost.py", "--json", "docs/fluid_step_cost_cpu.json"),
+        3,
+        quick=(
+            "benchmarks/fluid_step_cost.py",
+            "--n",
+            "200",
+            "--steps",
+            "50",
+            "--rounds",
+            "3",
+            "--json",
+            "{tmp}/fluid_step_cost_cpu.json",
+        ),
+        quick_minutes=1,
+        sources=(*BASE, *VACUUM, *FLUID, "benchmarks/fluid_step_cost.py"),
+    ),
 }

@@ -34,6 +34,7 @@ from jaxrot import quaternion as quat
 from jaxrot._fluid._fluid import check_fluid
 from jaxrot._integrate._overdamped import velocity_field
 from jaxrot.comparison import machine_info
+from jaxrot.comparison._fluid import FLUID_ROWS, OVERDAMPED_ROWS
 from jaxrot.schemes import OVERDAMPED_SCHEMES
 from jaxrot.schemes._exponential import FluidArgs
 
@@ -193,13 +194,13 @@ def main(argv=None):
     stokes_numbers = (1.0, 1e-6) if ns.quick else (1.0, 1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8)
     levels = 3 if ns.quick else 5
     rows = []
-    for name in jaxrot.FLUID_SCHEMES:
+    for name in FLUID_ROWS:
         rows.append(frictionless_row(name, levels))
         for stokes in stokes_numbers:
             for with_magnet in (False, True):
                 rows.append(fluid_row(name, stokes, with_magnet, levels))
                 print(table(rows[-1:]).splitlines()[-1], flush=True)
-    rows += [overdamped_row(name, levels) for name in OVERDAMPED_SCHEMES]
+    rows += [overdamped_row(name, levels) for name in OVERDAMPED_ROWS]
     print(table(rows))
     if not ns.quick:
         Path(ns.out).write_text(json.dumps({"machine": machine_info(), "rows": rows}, indent=2))

@@ -53,7 +53,7 @@ from jaxrot import quaternion as quat
 from jaxrot._diffrax._reference import adaptive_solve
 from jaxrot._particles import PARTICLES
 from jaxrot.comparison import machine_info
-from jaxrot.comparison._fluid import inertial_runner, overdamped_runner, plain_fluid_torque
+from jaxrot.comparison._fluid import FLUID_ROWS, inertial_runner, overdamped_runner, plain_fluid_torque
 from jaxrot.scenes import spheroid_shear
 from jaxrot.schemes import OVERDAMPED_SCHEMES, ExpRK4
 
@@ -218,7 +218,7 @@ def race_one(stokes, n, repeats, time_cap, floor, max_steps, quick, log):
             if err < floor or seconds > time_cap or stalled or (quick and (len(errors) >= 12 or err < 1e-4)):
                 break
 
-    for name, scheme in jaxrot.FLUID_SCHEMES.items():
+    for name, scheme in FLUID_ROWS.items():
         fixed(name, name, inertial_runner(scheme, scene, n), scheme.order, 8, scheme.torque_evals_per_step)
     # The bodies start at their slow velocity, where the graded start (tens of substeps once per run)
     # buys little: the same scheme with plain steps from the first, a row a user can choose.

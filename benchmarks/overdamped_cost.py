@@ -24,7 +24,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxrot  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
-from jaxrot.comparison._fluid import plain_fluid_torque  # noqa: E402
+from jaxrot.comparison._fluid import OVERDAMPED_ROWS, plain_fluid_torque  # noqa: E402
 from jaxrot.scenes import spheroid_shear  # noqa: E402
 from jaxrot.schemes import OVERDAMPED_SCHEMES  # noqa: E402
 
@@ -45,7 +45,7 @@ def runners(n_bodies):
             ).q
         )
     }
-    schemes = {name: scheme for name, scheme in OVERDAMPED_SCHEMES.items()}
+    schemes = dict(OVERDAMPED_ROWS)
     schemes["rkmk4, Cayley chart"] = type(OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")
     for name, scheme in schemes.items():
         out[f"overdamped {name}"] = lambda scheme=scheme: (

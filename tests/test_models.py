@@ -55,6 +55,9 @@ def nothing_compiles(monkeypatch):
 
 def test_each_name_is_one_scheme_and_the_views_agree_with_schemes_for():
     assert len(REGISTRY) == 18  # 10 in vacuum, 2 in a fluid, 2 thermal, 2 more overdamped, 2 Brownian
+    # The thermal (Brownian) schemes run the fluid (overdamped) call at kT = 0, so they list it.
+    assert {"baoab", "exp_euler"} <= set(jaxrot.FLUID_SCHEMES)
+    assert {"brownian_euler", "brownian_splitting"} <= set(jaxrot.OVERDAMPED_SCHEMES)
     for name, scheme in REGISTRY.items():
         assert scheme.name == name
         assert scheme.models and set(scheme.models) <= set(MODELS), name
@@ -75,14 +78,10 @@ def test_each_name_is_one_scheme_and_the_views_agree_with_schemes_for():
         jaxrot.schemes_for("liquid")
 
 
+# Every scheme × model pair: the call runs exactly the schemes that declare its model (`models` is
+# complete: a thermal scheme that runs the fluid call at kT = 0 declares "fluid", a Brownian one
+# "overdamped"), and refuses every other.
 PAIRS = [(name, model) for name in REGISTRY for model in MODELS]
-# At kT = 0 the call of the fluid (overdamped) model also runs a scheme of the thermal (Brownian) one,
-# without noise.
-ALSO_RUNS = {"fluid": "thermal", "overdamped": "brownian"}
-
-
-def runs(name, model):
-    return model in REGISTRY[name].models or ALSO_RUNS.get(model) in REGISTRY[name].models
 
 
 @pytest.mark.parametrize("name, model", [p for p in PAIRS if p[1] in REGISTRY[p[0]].models])
@@ -92,7 +91,7 @@ def test_a_scheme_runs_every_model_it_declares(name, model):
     assert traj.q.dtype == Q.dtype
 
 
-@pytest.mark.parametrize("name, model", [p for p in PAIRS if not runs(*p)])
+@pytest.mark.parametrize("name, model", [p for p in PAIRS if p[1] not in REGISTRY[p[0]].models])
 def test_a_scheme_refuses_every_model_it_does_not_declare_naming_those_that_run_it(
     name, model, nothing_compiles
 ):
@@ -170,8 +169,8 @@ def test_a_fluid_built_outside_jit_keeps_its_model():
 
 
 def test_at_zero_temperature_a_thermal_scheme_runs_without_noise():
-    """At a concrete kT = 0 the fluid (overdamped) model's call also runs a thermal (Brownian) scheme,
-    deterministically, and a fluid scheme runs with a key."""
+    """At a concrete kT = 0 a thermal (Brownian) scheme runs the fluid (overdamped) call
+    deterministically, a key given or not, and a fluid scheme runs with a key."""
     cold = jaxrot.Fluid(FRICTION)
     with_key = jaxrot.rollout("exp_rk4", STATE, INERTIA, 0.01, 2, fluid=cold, key=jax.random.key(0))
     without = jaxrot.rollout("exp_rk4", STATE, INERTIA, 0.01, 2, fluid=cold)
@@ -179,6 +178,10 @@ def test_at_zero_temperature_a_thermal_scheme_runs_without_noise():
     a = jaxrot.rollout("baoab", STATE, INERTIA, 0.01, 2, fluid=cold)
     b = jaxrot.rollout("baoab", STATE, INERTIA, 0.01, 2, fluid=cold, key=jax.random.key(1))
     assert bool(jnp.all(a.q == b.q))
-    c = jaxrot.overdamped_rollout(Q, cold, 0.01, 2, scheme="brownian_euler")
-    d = jaxrot.overdamped_rollout(Q, cold, 0.01, 2, scheme="brownian_euler", key=jax.random.key(2))
-    assert bool(jnp.all(c.q == d.q))
+    for name in ("brownian_euler", "brownian_splitting"):
+        c = jaxrot.overdamped_rollout(Q, cold, 0.01, 2, scheme=name)
+        d = jaxrot.overdamped_rollout(Q, cold, 0.01, 2, scheme=name, key=jax.random.key(2))
+        assert bool(jnp.all(c.q == d.q)), name
+    # The default is the model's: rkmk4 at kT = 0, a key given or not.
+    e = jaxrot.overdamped_rollout(Q, cold, 0.01, 2, key=jax.random.key(2))
+    assert bool(jnp.all(e.q == jaxrot.overdamped_rollout(Q, cold, 0.01, 2, scheme="rkmk4").q))

@@ -76,20 +76,23 @@ def body_flow(q, velocity_gradient, bretherton):
     ``rate(u) -> ġ`` ``(3,)``, its rate of change along a body-frame angular velocity ``u``
     (``q̇ = ½ q ⊗ (0, u)``).
 
-    With ``Ω_b = Rᵀ Ω`` and ``E_b = Rᵀ E R``: ``g = Ω_b + B e_z × (E_b e_z)`` and, as
-    ``d(Rᵀ x)/dt = −u × Rᵀ x``, ``ġ = −u × Ω_b + B e_z × (E_b (u × e_z) − u × (E_b e_z))``. Written
-    out: fewer operations than a `jax.jvp` of ``g`` (tests/test_fluid.py compares the two).
+    As ``d(Rᵀ x)/dt = −u × Rᵀ x + Rᵀ ẋ`` and ``Ω`` is constant: ``ġ = −u × g + Rᵀ ω̇_f`` with
+    ``ω̇_f = B (ṗ × (E p) + p × (E ṗ))``, ``ṗ = (R u) × p``. Written out: fewer operations than a
+    `jax.jvp` of ``g`` (tests/test_fluid.py compares the two), and three products of ``R`` with a
+    vector instead of the body-frame strain ``Rᵀ E R`` (two 3 × 3 matrix products per stage, most
+    of an exponential step's operations in a shear: benchmarks/fluid_step_cost.py). The products
+    stay matrix products: written as elementwise sums or as quaternion rotations, fewer operations
+    ran slower on XLA:CPU (measured).
     """
     rotation = quat.to_matrix(q)
-    vorticity = rotation.T @ vorticity_rate(velocity_gradient)
-    strain = rotation.T @ strain_rate(velocity_gradient) @ rotation
-    strained_axis = strain[:, 2]  # E_b e_z
-
-    def ez_cross(w):  # e_z × w
-        return jnp.stack([-w[1], w[0], jnp.zeros_like(w[0])])
+    strain = strain_rate(velocity_gradient)
+    p = rotation[:, 2]
+    strained = strain @ p  # E p
+    g = rotation.T @ (vorticity_rate(velocity_gradient) + bretherton * jnp.cross(p, strained))
 
     def rate(u):
-        axis_rate = strain @ jnp.stack([u[1], -u[0], jnp.zeros_like(u[0])]) - jnp.cross(u, strained_axis)
-        return -jnp.cross(u, vorticity) + bretherton * ez_cross(axis_rate)
+        p_dot = jnp.cross(rotation @ u, p)
+        flow_dot = bretherton * (jnp.cross(p_dot, strained) + jnp.cross(p, strain @ p_dot))
+        return -jnp.cross(u, g) + rotation.T @ flow_dot
 
-    return vorticity + bretherton * ez_cross(strained_axis), rate
+    return g, rate

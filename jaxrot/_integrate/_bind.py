@@ -8,7 +8,8 @@ A scheme is a method, a model what it integrates (`jaxrot.schemes`: every scheme
 - `jaxrot.overdamped_rollout`: ``"overdamped"`` at ``kT = 0``, ``"brownian"`` at ``kT > 0`` with a
   ``key``.
 
-At ``kT = 0`` a scheme of the thermal (Brownian) model also runs, without noise. Whether ``kT`` is 0
+A thermal (Brownian) scheme also lists the fluid (overdamped) model: at ``kT = 0`` it runs without
+noise, a key given or not (the same program). Whether ``kT`` is 0
 is read from its value, or under ``jit`` from what `jaxrot.Fluid` recorded where it was built; a
 ``kT`` built from a traced value counts as a temperature when a ``key`` is given, and without one it
 is refused at trace time: whether it is 0 is not known before the program runs. `scheme_for_call` checks the
@@ -80,50 +81,50 @@ def temperature(fluid) -> str:
     return fluid.temperature if now == "traced" else now
 
 
-def call_models(entry: str, fluid, key) -> tuple[str, ...] | None:
-    """The models a scheme may integrate for this call, the first the one an error names; None when
-    the call needs a key it lacks (a concrete ``kT > 0`` or a traced ``kT`` without ``key``)."""
+def call_model(entry: str, fluid, key) -> str | None:
+    """The model of this call; None when it needs a key it lacks (a concrete ``kT > 0`` or a traced
+    ``kT`` without ``key``)."""
     if entry == INERTIAL and fluid is None:
-        return ("vacuum",)
+        return "vacuum"
     if not isinstance(fluid, Fluid):
         raise ValueError(f"`fluid` must be {'None or ' if entry == INERTIAL else ''}a jaxrot.Fluid; got "
                          f"{type(fluid).__name__}.")  # fmt: skip
     cold, warm = _ENTRY_MODELS[entry]
     if temperature(fluid) == "zero":
-        return (cold, warm)  # a thermal scheme runs it without noise
-    return (warm,) if key is not None else None
+        return cold  # a key, if given, has nothing to draw
+    return warm if key is not None else None
 
 
 def scheme_for_call(scheme, entry: str, fluid=None, key=None):
     """``(scheme object, model)`` for a call of ``entry`` (`INERTIAL` or `OVERDAMPED`) with ``fluid``
-    and ``key``; ``scheme`` a registered name, an instance, or (overdamped) None for the default.
+    and ``key``; ``scheme`` a registered name, an instance, or (overdamped) None for the model's default.
 
     Raises:
         ValueError: an unknown name, a scheme whose ``models`` do not hold the call's model, or a
             temperature without a ``key``, naming the schemes that run this very call.
     """
-    models = call_models(entry, fluid, key)
+    model = call_model(entry, fluid, key)
     if scheme is None and entry == OVERDAMPED:
-        scheme = DEFAULT_BROWNIAN if key is not None else DEFAULT_OVERDAMPED
+        scheme = DEFAULT_BROWNIAN if model == "brownian" else DEFAULT_OVERDAMPED
     try:
         scheme = resolve_scheme(scheme)
     except ValueError:  # the same refusal, with the schemes of this very call
-        raise ValueError(_unknown(scheme, entry, models, fluid)) from None
-    if models is None:
+        raise ValueError(_unknown(scheme, entry, model, fluid)) from None
+    if model is None:
         raise ValueError(_needs_key(scheme, entry, fluid))
-    fitting = [model for model in models if model in scheme.models]
-    if not fitting:
-        raise ValueError(_misfit(scheme, entry, models[0]))
-    return scheme, fitting[0]
+    if model not in scheme.models:
+        raise ValueError(_misfit(scheme, entry, model))
+    return scheme, model
 
 
-def _unknown(scheme, entry, models, fluid) -> str:
-    model = models[0] if models is not None else _ENTRY_MODELS[entry][1]
+def _unknown(scheme, entry, model, fluid) -> str:
+    known = model is not None
+    model = model if known else _ENTRY_MODELS[entry][1]
     text = (
         f"`scheme` must be one of {candidates(model)} for this call ({_BODY[model]}), or a jaxrot.schemes "
         f"scheme instance; got {scheme!r}."
     )
-    if models is None:
+    if not known:
         text += " " + (_TRACED if temperature(fluid) == "traced" else "") + _NEEDS_KEY
     return text + " Every scheme by model: jaxrot.schemes_for(model)."
 
@@ -184,8 +185,6 @@ def bind_fluid(scheme, model, fluid, key, batch_shape, dtype, inertia, args, arg
         raise ValueError("`drive` and `fluid` cannot be combined: pass one of them.")
     values, axes = check_fluid(fluid, batch_shape, dtype)
     if model == "thermal":
-        # At a kT known to be 0 there is no noise to draw: the same program with a key or without.
-        key = None if fluid.temperature == "zero" else key
         return bind_thermal(scheme, values, axes, args, args_axes, key, int(np.prod(batch_shape)))
     return scheme.in_fluid(), FluidArgs(args, values), FluidArgs(args_axes, axes)
 

@@ -62,10 +62,10 @@ def overdamped_rollout(
             ``fluid.friction`` instead.
         args: the torque's parameters (`jaxrot.per_body` leaves: one per body).
         scheme: a name of `jaxrot.schemes_for` of the call's model, or a scheme instance. At
-            ``kT = 0``: ``"rkmk4"`` (order 4; the default without a ``key``), ``"lie_euler"`` (1),
+            ``kT = 0``: ``"rkmk4"`` (order 4; the default, a ``key`` or not), ``"lie_euler"`` (1),
             ``"lie_midpoint"`` (2), e.g. ``type(jaxrot.OVERDAMPED_SCHEMES["rkmk4"])(chart="cayley")``
-            (half the operations a step, not exact at a constant angular velocity); a Brownian
-            scheme also runs there, without noise. At ``kT > 0`` with a ``key``:
+            (half the operations a step, not exact at a constant angular velocity), and the Brownian
+            schemes without noise. At ``kT > 0`` with a ``key``:
             ``"brownian_splitting"`` (weak order 2; the default with a ``key``) or
             ``"brownian_euler"`` (weak order 1).
         save_every: save every ``save_every`` steps (it must divide ``n_steps``); t0: initial time.

@@ -44,9 +44,9 @@ def rollout(
     Args:
         scheme: a name of `jaxrot.schemes_for` of the call's model, or a scheme instance: without
             ``fluid`` one of `jaxrot.SCHEMES` (``"zhao"``, …); with ``fluid`` one of
-            `jaxrot.FLUID_SCHEMES` at ``kT = 0`` (``"exp_midpoint"``, ``"exp_rk4"``) and of
-            `jaxrot.THERMAL_SCHEMES` at ``kT > 0`` with a ``key`` (``"baoab"``, ``"exp_euler"``); a
-            thermal scheme also runs at a concrete ``kT = 0``, without noise.
+            `jaxrot.FLUID_SCHEMES` at ``kT = 0`` (``"exp_midpoint"``, ``"exp_rk4"``, and the thermal
+            schemes without noise) and of `jaxrot.THERMAL_SCHEMES` at ``kT > 0`` with a ``key``
+            (``"baoab"``, ``"exp_euler"``).
         state: `RotState` with ``q`` ``(..., 4)`` (unit, scalar first, body →
             world) and ``omega`` ``(..., 3)`` (world frame). Leading axes are
             particles; they are vmapped.

@@ -43,14 +43,16 @@ DIFFRAX_SOLVERS = {
     "diffrax_kvaerno5": diffrax.Kvaerno5,
 }
 OVERDAMPED_PREFIX = "overdamped_"
+# The schemes raced on a fluid's deterministic models. The thermal (Brownian) schemes run these
+# models too, at kT = 0, but are measured at a temperature (benchmarks/thermal_orders.py).
+FLUID_ROWS = {n: s for n, s in FLUID_SCHEMES.items() if "thermal" not in s.models}
+OVERDAMPED_ROWS = {n: s for n, s in OVERDAMPED_SCHEMES.items() if "brownian" not in s.models}
 
 
 def fixed_methods(scene) -> dict:
     """The fixed-step methods of ``scene``: ``{name: (kind, scheme)}``, ``"inertial"`` or ``"overdamped"``."""
-    methods = {} if scene.inertia is None else {n: ("inertial", s) for n, s in FLUID_SCHEMES.items()}
-    overdamped = {
-        OVERDAMPED_PREFIX + n: ("overdamped", s.overdamped()) for n, s in OVERDAMPED_SCHEMES.items()
-    }
+    methods = {} if scene.inertia is None else {n: ("inertial", s) for n, s in FLUID_ROWS.items()}
+    overdamped = {OVERDAMPED_PREFIX + n: ("overdamped", s.overdamped()) for n, s in OVERDAMPED_ROWS.items()}
     methods.update(overdamped)
     return methods
 

@@ -119,8 +119,8 @@ def schemes_for(model: str) -> dict:
 
     Example:
         >>> import jaxrot
-        >>> list(jaxrot.schemes_for("overdamped"))
-        ['lie_euler', 'lie_midpoint', 'rkmk4']
+        >>> list(jaxrot.schemes_for("overdamped"))  # the Brownian schemes run it at kT = 0, without noise
+        ['lie_euler', 'lie_midpoint', 'rkmk4', 'brownian_euler', 'brownian_splitting']
     """
     if model not in MODELS:
         raise ValueError(f"`model` must be one of {', '.join(map(repr, MODELS))}; got {model!r}.")

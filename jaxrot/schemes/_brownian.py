@@ -25,6 +25,7 @@ import numpy as np
 from .. import quaternion as quat
 from .._core._concrete import is_concrete
 from .._core._fusion import stage
+from .._state import RotState
 from ._heat_kernel import SMALL_STEP, heat_kernel_rotation
 from ._noise import step_normals
 
@@ -61,7 +62,7 @@ class AbstractBrownianScheme(eqx.Module):
     key_impl: str | None = eqx.field(default=None, static=True)
     name: eqx.AbstractClassVar[str]
     order: eqx.AbstractClassVar[int]
-    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped", "brownian"})
     normals_per_step: eqx.AbstractClassVar[int]
     velocity_evals_per_step: eqx.AbstractClassVar[int]
 
@@ -82,6 +83,39 @@ class AbstractBrownianScheme(eqx.Module):
     @abc.abstractmethod
     def advance(self, q, omega, diffusion, t, dt, velocity, normals):
         """``(q₁, ω(t + Δt, q₁))`` from ``q`` with ``omega = ω(t, q)``; ``velocity(t, q) -> (3,)`` world."""
+
+    def overdamped(self) -> "Noiseless":
+        """The stepper of the ``"overdamped"`` model (``kT = 0``): this scheme without noise."""
+        return Noiseless(self)
+
+
+class Noiseless(eqx.Module):
+    """A Brownian scheme at ``kT = 0``, with the interface of
+    `jaxrot.schemes.AbstractOverdampedScheme` (carry: a `RotState` ``(q, ω(t, q))``): its `advance`
+    without normals, which then needs no key and no diffusion."""
+
+    scheme: AbstractBrownianScheme
+
+    @property
+    def name(self) -> str:
+        return self.scheme.name
+
+    @property
+    def order(self) -> int:
+        return self.scheme.order
+
+    @property
+    def velocity_evals_per_step(self) -> int:
+        return self.scheme.velocity_evals_per_step
+
+    def overdamped(self) -> "Noiseless":
+        return self
+
+    def init(self, q, t0, velocity) -> RotState:
+        return RotState(q, velocity(t0, q))
+
+    def step(self, carry: RotState, t, dt, velocity) -> RotState:
+        return RotState(*self.scheme.advance(carry.q, carry.omega, None, t, dt, velocity, None))
 
 
 def _body_turn(q, rotvec_body):
@@ -108,7 +142,7 @@ class BrownianEuler(AbstractBrownianScheme):
 
     name: ClassVar[str] = "brownian_euler"
     order: ClassVar[int] = 1
-    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped", "brownian"})
     normals_per_step: ClassVar[int] = 3
     velocity_evals_per_step: ClassVar[int] = 1
 
@@ -152,7 +186,7 @@ class BrownianSplitting(AbstractBrownianScheme):
 
     name: ClassVar[str] = "brownian_splitting"
     order: ClassVar[int] = 2
-    models: ClassVar[frozenset[str]] = frozenset({"brownian"})
+    models: ClassVar[frozenset[str]] = frozenset({"overdamped", "brownian"})
     normals_per_step: ClassVar[int] = 8
     velocity_evals_per_step: ClassVar[int] = 4
     # Static: whether some body's ``D_min Δt`` may exceed `SMALL_STEP` (the heat kernel's spectral

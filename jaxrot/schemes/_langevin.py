@@ -59,16 +59,22 @@ class AbstractLangevinScheme(AbstractScheme):
     per body and step). ``order`` is the weak order (bias of ensemble averages), measured by the
     tests; at ``kT = 0`` it is also the scheme's deterministic order. The static field ``key_impl``
     (the PRNG implementation of the run's key, None without noise) is set by the rollout, which gives
-    ``args`` as a `ThermalArgs` (`jaxrot._integrate._bind`, which refuses any other call).
+    ``args`` as a `ThermalArgs` at a temperature (``"thermal"``); a Langevin scheme also runs the
+    ``"fluid"`` model (``kT = 0``), as `in_fluid` with ``args`` a `FluidArgs` and no noise
+    (`jaxrot._integrate._bind` decides which).
     """
 
     key_impl: str | None = eqx.field(default=None, static=True)
     normals_per_step: eqx.AbstractClassVar[int]
-    models: ClassVar[frozenset[str]] = frozenset({"thermal"})
+    models: ClassVar[frozenset[str]] = frozenset({"fluid", "thermal"})
 
     def bind(self, key_impl: str | None) -> "AbstractLangevinScheme":
         """This scheme for a rollout in a fluid whose noise comes from keys of ``key_impl``."""
         return dataclasses.replace(self, key_impl=key_impl)
+
+    def in_fluid(self) -> "AbstractLangevinScheme":
+        """This scheme for the ``"fluid"`` model (``kT = 0``): ``args`` a `FluidArgs`, no noise."""
+        return self.bind(None)
 
     def state(self, carry):
         return carry.state
@@ -77,7 +83,7 @@ class AbstractLangevinScheme(AbstractScheme):
         raise NotImplementedError("drives are not supported in a fluid")
 
     def init(self, state, t0, inertia, torque, args):
-        args, fluid, _ = args  # a `ThermalArgs`
+        args, fluid, _ = _unpack(args)
         return LangevinCarry(RotState(*state), self.initial_torque(t0, state, torque, args), jnp.int32(0))
 
     def initial_torque(self, t0, state, torque, args):
@@ -85,7 +91,7 @@ class AbstractLangevinScheme(AbstractScheme):
         return None
 
     def step(self, carry, t, dt, inertia, torque, args):
-        args, fluid, key_data = args  # a `ThermalArgs`
+        args, fluid, key_data = _unpack(args)
         normals = None
         if key_data is not None:
             normals = step_normals(key_data, self.key_impl, carry.step, self.normals_per_step, dt.dtype)
@@ -96,6 +102,11 @@ class AbstractLangevinScheme(AbstractScheme):
         """One step of one body from ``carry`` at ``t`` with the given standard normals
         ``(normals_per_step,)`` (None: no noise); ``fluid`` one body's `jaxrot.Fluid` values,
         ``inertia`` a diagonal `jaxrot.BodyInertia`, ``args`` the torque's own."""
+
+
+def _unpack(args):
+    """``(torque's args, fluid, key data)`` of a `ThermalArgs`, or of a `FluidArgs` (no key: kT = 0)."""
+    return args.args, args.fluid, getattr(args, "key_data", None)
 
 
 def body_flow_rotation(q, fluid):

@@ -78,7 +78,7 @@ class BAOAB(AbstractLangevinScheme):
 
     name: ClassVar[str] = "baoab"
     order: ClassVar[int] = 2
-    models: ClassVar[frozenset[str]] = frozenset({"thermal"})
+    models: ClassVar[frozenset[str]] = frozenset({"fluid", "thermal"})
     torque_evals_per_step: ClassVar[int] = 1
     torque_evals_at_init: ClassVar[int] = 1
     normals_per_step: ClassVar[int] = 6

@@ -52,7 +52,7 @@ class ExpEuler(AbstractLangevinScheme):
 
     name: ClassVar[str] = "exp_euler"
     order: ClassVar[int] = 1
-    models: ClassVar[frozenset[str]] = frozenset({"thermal"})
+    models: ClassVar[frozenset[str]] = frozenset({"fluid", "thermal"})
     torque_evals_per_step: ClassVar[int] = 1
     normals_per_step: ClassVar[int] = 6
 
