@@ -42,7 +42,8 @@ from jaxrot.comparison import machine_info  # noqa: E402
 
 
 try:
-    from jax_md import energy, quantity, rigid_body, simulate, space
+    from jax_md import rigid_body, simulate
+    from jax_md_systems import free_system, shape, tetrahedra
 
     import jaxrot.jax_md as jm
 except ImportError:  # regenerate.py's other jobs run on Python 3.11, where jax_md is not installed
@@ -59,31 +60,6 @@ KT, G = 1.0, 10.0
 DTS = (1 / 64, 1 / 16, 1 / 4, 1 / 2)
 NVE_DTS = (1 / 64, 1 / 16, 1 / 4)
 METHODS = {"jaxrot baoab": jm.nvt_langevin, "jax_md nvt_langevin": simulate.nvt_langevin}
-
-
-def shape():
-    return rigid_body.point_union_shape(
-        rigid_body.tetrahedron.points * jnp.array([[1.0, 2.0, 3.0]]), rigid_body.tetrahedron.masses
-    )
-
-
-def bodies(n, box, key):
-    k_position, k_orientation = jax.random.split(key)
-    center = box * jax.random.uniform(k_position, (n, 3), jnp.float64)
-    q = jax.vmap(lambda k: rigid_body._random_quaternion(k, jnp.float64))(jax.random.split(k_orientation, n))
-    return rigid_body.RigidBody(center, rigid_body.Quaternion(q))
-
-
-def free_system(n):
-    _, shift = space.free()
-    return (lambda position, **kw: 0.0 * jnp.sum(position.center)), shift, bodies(n, 100.0, jax.random.key(1))
-
-
-def tetrahedra(n, density=0.1):
-    box = quantity.box_size_at_number_density(n, density, 3)
-    displacement, shift = space.periodic(box)
-    energy_fn = rigid_body.point_energy(energy.soft_sphere_pair(displacement), shape())
-    return energy_fn, shift, bodies(n, box, jax.random.key(0))
 
 
 def axis_temperature(state):
