@@ -159,7 +159,23 @@ JOBS = {
     "thermal_peers": Job(("thermal_peers.json",), ("benchmarks/thermal_peers.py", "--timing"), 25, True),
     # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
     # error, cost per body-step (Python 3.12 with jax_md: --python <venv312>/bin/python).
-    "jax_md_rigid": Job(("jax_md_cpu.json", "jax_md_cpu.png"), ("benchmarks/jax_md_rigid.py",), 20, True),
+    # --quick: the cost table alone (per body-step free and interacting, first call), printed.
+    "jax_md_rigid": Job(
+        ("jax_md_cpu.json", "jax_md_cpu.png"),
+        ("benchmarks/jax_md_rigid.py",),
+        20,
+        True,
+        quick=("benchmarks/jax_md_rigid.py", "--quick"),
+        sources=(
+            "benchmarks/jax_md_rigid.py",
+            "benchmarks/jax_md_systems.py",
+            "jaxrot/jax_md",
+            "jaxrot/schemes/baoab.py",
+            "jaxrot/schemes/_ou.py",
+            "jaxrot/schemes/_noise.py",
+            "jaxrot/_free_body",
+        ),
+    ),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),
         ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
