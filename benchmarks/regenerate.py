@@ -176,6 +176,22 @@ JOBS = {
             "jaxrot/_free_body",
         ),
     ),
+    # jaxrot.jax_md.brownian against closed forms (Favro per body axis, 2dDt, the Langevin function):
+    # accuracy only (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    "jax_md_brownian": Job(
+        ("jax_md_brownian.json",),
+        ("benchmarks/jax_md_brownian.py",),
+        6,
+        True,
+        quick=("benchmarks/jax_md_brownian.py", "--quick"),
+        sources=(
+            "benchmarks/jax_md_brownian.py",
+            "benchmarks/jax_md_systems.py",
+            "jaxrot/jax_md",
+            "jaxrot/schemes/_brownian.py",
+            "jaxrot/schemes/_heat_kernel.py",
+        ),
+    ),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),
         ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
