@@ -67,6 +67,7 @@ THERMAL = (
 DIFFRAX = ("jaxrot/_diffrax",)
 SCENES = ("jaxrot/scenes", "jaxrot/analytic.py")
 FIT = ("jaxrot/_fit", "tests/_telemetry.py")
+JAX_MD = (*BASE, *VACUUM, *THERMAL, *FLUID, "jaxrot/jax_md", "benchmarks/jax_md_systems.py")
 
 
 JOBS = {
@@ -291,13 +292,22 @@ JOBS = {
         ("benchmarks/jax_md_rigid.py",),
         20,
         True,
+        # The cost table alone (free, interacting, first call), printed.
         quick=("benchmarks/jax_md_rigid.py", "--quick", "--out", "{tmp}/jax_md_cpu.json"),
-        quick_minutes=3,
-        tables=(
-            "jax_md_cost_table",
-            "jax_md_temperature_table",
-        ),
-        sources=(*BASE, *VACUUM, *THERMAL, *FLUID, "jaxrot/jax_md", "benchmarks/jax_md_rigid.py"),
+        quick_minutes=4,
+        tables=("jax_md_cost_table",),
+        sources=JAX_MD + ("benchmarks/jax_md_rigid.py",),
+    ),
+    # jaxrot.jax_md.brownian against closed forms (Favro per body axis, 2dDt, the Langevin function):
+    # accuracy only (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    "jax_md_brownian": Job(
+        ("jax_md_brownian.json",),
+        ("benchmarks/jax_md_brownian.py",),
+        6,
+        quick=("benchmarks/jax_md_brownian.py", "--quick", "--out", "{tmp}/jax_md_brownian.json"),
+        quick_minutes=1,
+        sources=JAX_MD + ("benchmarks/jax_md_brownian.py",),
+        timed=False,
     ),
     "rotor_choice": Job(
         ("rotor_choice_cpu.json",),

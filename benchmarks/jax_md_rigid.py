@@ -13,12 +13,14 @@ interactions: the thermostat alone):
   kT = 1), jax_md's ``nve`` against `jaxrot.jax_md.nve` (``"splitting"``, the exact rotor, and
   ``"no_squish"``), at equal dt.
 - ``cost``: seconds per body-step of each thermostat's compiled step (the median of interleaved
-  rounds), free bodies and interacting ones (the energy's cost then included on both sides).
+  rounds), free bodies and interacting ones (the energy's cost then included on both sides);
+  ``first_call``: seconds of the first call of a 1000-step loop on 40 tetrahedra (trace, compile,
+  run; fresh closures each round). The cost table, with the ratios, is printed at the end.
 
 Needs jax_md (``pip install -e ".[jax_md]"``, Python 3.12: jax_md excludes jax 0.10.2)::
 
     python benchmarks/jax_md_rigid.py                    # writes docs/jax_md_cpu.json
-    python benchmarks/jax_md_rigid.py --quick            # tiny sizes, nothing written
+    python benchmarks/jax_md_rigid.py --quick            # the cost table only (a few minutes), printed
     python benchmarks/regenerate.py --only jax_md_rigid --python /path/to/py312/bin/python
 """
 
@@ -42,7 +44,8 @@ from jaxrot.comparison import machine_info  # noqa: E402
 
 
 try:
-    from jax_md import energy, quantity, rigid_body, simulate, space
+    from jax_md import rigid_body, simulate
+    from jax_md_systems import free_system, shape, tetrahedra
 
     import jaxrot.jax_md as jm
 except ImportError:  # regenerate.py's other jobs run on Python 3.11, where jax_md is not installed
@@ -59,31 +62,6 @@ KT, G = 1.0, 10.0
 DTS = (1 / 64, 1 / 16, 1 / 4, 1 / 2)
 NVE_DTS = (1 / 64, 1 / 16, 1 / 4)
 METHODS = {"jaxrot baoab": jm.nvt_langevin, "jax_md nvt_langevin": simulate.nvt_langevin}
-
-
-def shape():
-    return rigid_body.point_union_shape(
-        rigid_body.tetrahedron.points * jnp.array([[1.0, 2.0, 3.0]]), rigid_body.tetrahedron.masses
-    )
-
-
-def bodies(n, box, key):
-    k_position, k_orientation = jax.random.split(key)
-    center = box * jax.random.uniform(k_position, (n, 3), jnp.float64)
-    q = jax.vmap(lambda k: rigid_body._random_quaternion(k, jnp.float64))(jax.random.split(k_orientation, n))
-    return rigid_body.RigidBody(center, rigid_body.Quaternion(q))
-
-
-def free_system(n):
-    _, shift = space.free()
-    return (lambda position, **kw: 0.0 * jnp.sum(position.center)), shift, bodies(n, 100.0, jax.random.key(1))
-
-
-def tetrahedra(n, density=0.1):
-    box = quantity.box_size_at_number_density(n, density, 3)
-    displacement, shift = space.periodic(box)
-    energy_fn = rigid_body.point_energy(energy.soft_sphere_pair(displacement), shape())
-    return energy_fn, shift, bodies(n, box, jax.random.key(0))
 
 
 def axis_temperature(state):
@@ -182,6 +160,47 @@ def cost(system, label, dt, steps, rounds):
     return found
 
 
+def first_call(system, label, dt, steps, rounds):
+    """Seconds of each method's first call of a jitted ``steps``-step loop (trace, compile and run, as a
+    user's first call), each round with fresh closures (nothing cached), methods interleaved; median."""
+    energy_fn, shift, body = system
+    times = {method: [] for method in METHODS}
+    for _ in range(rounds):
+        for method, sim in METHODS.items():
+            init_fn, apply_fn = sim(energy_fn, shift, dt, KT, rigid_body.RigidBody(G, G))
+            state = init_fn(jax.random.key(3), body, mass=shape().mass())
+            loop = jax.jit(lambda s, f=apply_fn: jax.lax.fori_loop(0, steps, lambda i, s_: f(s_), s))
+            start = time.perf_counter()
+            jax.block_until_ready(loop(state))
+            times[method].append(time.perf_counter() - start)
+    found = []
+    for method, ts in times.items():
+        found.append(
+            {"system": label, "method": method, "bodies": body.center.shape[0], "dt": dt, "steps": steps,
+             "rounds": rounds, "first_call_s": statistics.median(ts)}
+        )  # fmt: skip
+        median = statistics.median(ts)
+        print(f"first call {label:12s} {method:20s} {median:7.2f} s", file=sys.stderr, flush=True)
+    return found
+
+
+def print_cost_table(cost_rows, first_rows):
+    """jaxrot and jax_md side by side with their ratio: per body-step (free, interacting), first call."""
+    print("| system | jaxrot.jax_md baoab | jax_md nvt_langevin | jaxrot / jax_md |")
+    print("|---|---|---|---|")
+    parts = ((cost_rows, "seconds_per_body_step", "ns", 1e9), (first_rows, "first_call_s", "s", 1))
+    for rows, key, unit, scale in parts:
+        by = {}
+        for r in rows:
+            by.setdefault(r["system"], {})[r["method"]] = r
+        for system, found in by.items():
+            a, b = (found[m][key] for m in METHODS)
+            n = found["jaxrot baoab"]["bodies"]
+            what = "first call" if key == "first_call_s" else "per body-step"
+            sides = f"{a * scale:.4g} {unit} | {b * scale:.4g} {unit}"
+            print(f"| {system} ({n} bodies), {what} | {sides} | {a / b:.2f} |")
+
+
 def plot(json_path, png_path):
     """Per-axis rotational temperature / kT against dt, both thermostats (free bodies), from the results."""
     import matplotlib
@@ -221,7 +240,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--bodies", type=int, default=4000, help="free bodies for the temperatures")
     parser.add_argument("--snapshots", type=int, default=40, help="snapshots per temperature")
-    parser.add_argument("--quick", action="store_true", help="tiny sizes, nothing written")
+    parser.add_argument(
+        "--quick", action="store_true", help="the cost table only (fewer bodies), printed, not written"
+    )
     parser.add_argument("--out", default=str(ROOT / "docs" / "jax_md_cpu.json"))
     parser.add_argument("--plot-only", action="store_true", help="redraw the figure from --out and exit")
     args = parser.parse_args(argv)
@@ -229,28 +250,32 @@ def main(argv=None):
     if args.plot_only:
         plot(args.out, png)
         return
-    n, snapshots = (256, 8) if args.quick else (args.bodies, args.snapshots)
+    if args.quick:  # the cost table alone, at sizes a few minutes cover
+        cost_rows = cost(free_system(2000), "free", 1 / 16, 50, 5)
+        cost_rows += cost(tetrahedra(64), "tetrahedra", 1 / 64, 50, 5)
+        print_cost_table(cost_rows, first_call(tetrahedra(40), "tetrahedra", 1 / 64, 1000, 1))
+        return
+    n, snapshots = args.bodies, args.snapshots
     free = free_system(n)
     rows = []
-    for dt in DTS[:2] if args.quick else DTS:
+    for dt in DTS:
         for method in METHODS:
             row = {"system": "free", "method": method, "dt": dt, "bodies": n, "snapshots": snapshots}
             row.update(temperatures(free, method, dt, snapshots, 1.0))
             rows.append(row)
             report(f"free dt={dt:.4f}", row)
     interacting = tetrahedra(40)
-    snaps = 50 if args.quick else 400
+    snaps = 400
     for method in METHODS:
         row = {"system": "tetrahedra", "method": method, "dt": 1 / 64, "bodies": 40, "snapshots": snaps}
         row.update(temperatures(interacting, method, 1 / 64, snaps, 0.5))
         rows.append(row)
         report("tetrahedra dt=0.0156", row)
-    energy_rows = energy_errors(NVE_DTS[:1] if args.quick else NVE_DTS, t_end=2.0 if args.quick else 20.0)
-    steps, rounds = (16, 3) if args.quick else (100, 7)
-    cost_rows = cost(free_system(512 if args.quick else 10_000), "free", 1 / 16, steps, rounds)
-    cost_rows += cost(tetrahedra(64 if args.quick else 128), "tetrahedra", 1 / 64, steps, rounds)
-    if args.quick:
-        return
+    energy_rows = energy_errors(NVE_DTS, t_end=20.0)
+    cost_rows = cost(free_system(10_000), "free", 1 / 16, 100, 7)
+    cost_rows += cost(tetrahedra(128), "tetrahedra", 1 / 64, 100, 7)
+    first_rows = first_call(tetrahedra(40), "tetrahedra", 1 / 64, 1000, 3)
+    print_cost_table(cost_rows, first_rows)
     info = machine_info()
     info["jax_md"] = importlib.metadata.version("jax-md")
     command = ["python benchmarks/jax_md_rigid.py", *(argv if argv is not None else sys.argv[1:])]
@@ -261,6 +286,7 @@ def main(argv=None):
         "rows": rows,
         "energy": energy_rows,
         "cost": cost_rows,
+        "first_call": first_rows,
     }
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
     plot(args.out, png)

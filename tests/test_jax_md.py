@@ -1,7 +1,8 @@
 """jaxrot.jax_md: jaxrot's rotation schemes inside jax_md rigid-body simulations.
 
 On jax_md's own systems (`jax_md.rigid_body.point_union_shape` tetrahedra stretched to inertia
-(5.4, 10.4, 13.4), soft spheres, as in jax_md's tests/rigid_body_test.py). Skipped where jax_md is not
+(5.4, 10.4, 13.4), soft spheres, as in jax_md's tests/rigid_body_test.py), built by
+benchmarks/jax_md_systems.py as the benchmark builds them. Skipped where jax_md is not
 installed (`pip install -e ".[jax_md]"`, Python 3.12: jax_md excludes jax 0.10.2).
 
 Statistics: the per-axis rotational temperature ``T_l = ⟨L_l² / I_l⟩`` is averaged over ``N`` bodies and
@@ -11,6 +12,8 @@ snapshot means over ``√S`` (≈ ``√(2 / (N S))`` kT for the Maxwell law).
 """
 
 import functools
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -24,40 +27,22 @@ with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         "jax_md",
         reason='jax_md is not installed: pip install -e ".[jax_md]" (Python 3.12: it excludes jax 0.10.2)',
     )
-    from jax_md import energy, quantity, rigid_body, simulate, space
+    from jax_md import rigid_body, simulate, space
 
 import jaxrot.jax_md as jm
 from jaxrot import quaternion as quat
 
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import jax_md_systems as systems  # noqa: E402
+
+
+_shape, _bodies, _tetrahedra = systems.shape, systems.bodies, systems.tetrahedra
+_free_energy = systems.free_energy
+
+
 KT = 1.0
 G = 10.0  # jax_md's gamma: axis rates G M / (4 I_l) = 5.2, 2.7, 2.1 for this shape (M = 11.2)
-
-
-def _shape():
-    return rigid_body.point_union_shape(
-        rigid_body.tetrahedron.points * jnp.array([[1.0, 2.0, 3.0]]), rigid_body.tetrahedron.masses
-    )
-
-
-def _bodies(n, box, key):
-    k_position, k_orientation = jax.random.split(key)
-    center = box * jax.random.uniform(k_position, (n, 3), jnp.float64)
-    q = jax.vmap(lambda k: rigid_body._random_quaternion(k, jnp.float64))(jax.random.split(k_orientation, n))
-    return rigid_body.RigidBody(center, rigid_body.Quaternion(q))
-
-
-def _free_energy(position, **kwargs):
-    """No interactions: each body's thermostat alone (its per-axis temperature is exact at any dt)."""
-    return 0.0 * jnp.sum(position.center)
-
-
-def _tetrahedra(n=40, density=0.1):
-    """jax_md's test system: soft-sphere tetrahedra in a periodic box (rigid_body_test.py)."""
-    box = quantity.box_size_at_number_density(n, density, 3)
-    displacement, shift = space.periodic(box)
-    energy_fn = rigid_body.point_energy(energy.soft_sphere_pair(displacement), _shape())
-    return energy_fn, shift, _bodies(n, box, jax.random.key(0))
 
 
 def _axis_temperature(state):

@@ -52,6 +52,8 @@ RESULTS = {
     "thermal_peers.json": (None, "python benchmarks/regenerate.py --only thermal_peers"),
     # jaxrot.jax_md against jax_md's rigid-body simulators (Python 3.12 with .[jax_md]): not per scheme.
     "jax_md_cpu.json": (None, "python benchmarks/regenerate.py --only jax_md_rigid --python <py312>"),
+    # jaxrot.jax_md.brownian against closed forms (Python 3.12 with .[jax_md]): accuracy, not per scheme.
+    "jax_md_brownian.json": (None, "python benchmarks/regenerate.py --only jax_md_brownian --python <py312>"),
     "race_cpu/race_float64.json": ("method", "python benchmarks/regenerate.py --only race64"),
     "race_cpu/race_float32.json": ("method", "python benchmarks/regenerate.py --only race32"),
     "gpu_h100/race_heavy_top_float64.json": ("method", "python benchmarks/race.py (on the GPU)"),

@@ -29,7 +29,9 @@ Finite in value and gradient at ``x = 0`` (Taylor branch of ``V``), at ``x → �
 """
 
 import math
+from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from ._phi import phi_functions
@@ -93,16 +95,42 @@ def noise_scale(kT, friction, h, inertia):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, variance, 1.0)), 0.0) / inertia
 
 
+class Relaxation(NamedTuple):
+    """The weights of the exact O step over ``h``, per axis ``(3,)``: ``u₁ = decay u + pull S + spread ξ``.
+
+    ``decay = e^{−x}``, ``pull = 1 − e^{−x} = x φ₁(−x)``, ``spread = a √(2 φ₁(−2x))`` (None without
+    noise), ``x = ζh/I``. They depend on ``ζ``, ``I``, ``kT`` and ``h`` only: a scheme computes them
+    once per step, not once per body, where those are shared (`relaxation_weights`)."""
+
+    decay: jax.Array
+    pull: jax.Array
+    spread: jax.Array | None
+
+
+def relaxation_weights(friction, inertia, kT, h, noise=True) -> Relaxation:
+    """`Relaxation` of the O step over ``h``; ``noise`` (static) False leaves ``spread`` None."""
+    x = friction / inertia * h
+    decay, phi = phi_functions(-x, 1)
+    spread = None
+    if noise:
+        _, phi_double = phi_functions(-2 * x, 1)
+        spread = noise_scale(kT, friction, h, inertia) * jnp.sqrt(2 * phi_double)
+    return Relaxation(decay, x * phi, spread)
+
+
+def relax(u, slow, weights: Relaxation, normals=None):
+    """The O step of `spin_relaxation` with its weights given (``normals`` None: no noise)."""
+    u1 = weights.decay * u + weights.pull * slow  # not slow + decay (u − slow): see `integrated_spin`
+    if normals is not None:
+        u1 = u1 + weights.spread * normals
+    return u1
+
+
 def spin_relaxation(u, slow, friction, inertia, kT, h, normals=None):
     """The exact O step: body spin ``u`` ``(3,)`` relaxed towards ``slow`` over ``h`` with the noise
     of ``normals`` ``(3,)`` (standard normals; None: no noise). Per axis: friction, inertia ``(3,)``."""
-    x = friction / inertia * h
-    decay, phi = phi_functions(-x, 1)
-    u1 = decay * u + (x * phi) * slow  # not slow + decay (u − slow): see `integrated_spin`
-    if normals is not None:
-        _, phi_double = phi_functions(-2 * x, 1)
-        u1 = u1 + noise_scale(kT, friction, h, inertia) * jnp.sqrt(2 * phi_double) * normals
-    return u1
+    weights = relaxation_weights(friction, inertia, kT, h, noise=normals is not None)
+    return relax(u, slow, weights, normals)
 
 
 def integrated_spin(u, slow, friction, inertia, kT, h, normals=None):

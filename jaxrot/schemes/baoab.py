@@ -1,16 +1,18 @@
 """BAOAB: the Langevin splitting over the exact free rotor and the exact Ornstein–Uhlenbeck step."""
 
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._core._fusion import stage
 from .._free_body._rotor import free_rotor
 from .._state import RotState
 from ._base import world_torque
 from ._langevin import AbstractLangevinScheme, LangevinCarry, body_flow_rotation, kick
-from ._ou import bridge_spread, drift_factor, noise_scale, spin_relaxation
+from ._ou import Relaxation, bridge_spread, drift_factor, noise_scale, relax, relaxation_weights
 
 
 class BAOAB(AbstractLangevinScheme):
@@ -98,34 +100,65 @@ class BAOAB(AbstractLangevinScheme):
         q, omega = free_rotor(q, omega, moments, s, substeps=self.rotor_substeps)
         return (turn(q, omega) if not first else q), omega
 
+    def weights(self, friction, moments, kT, dt, noise: bool) -> "BAOABWeights":
+        """The step's weights, per principal axis: functions of ``ζΔt/I``, ``kT`` and ``Δt`` alone.
+
+        Staged (`jaxrot._core._fusion.stage`): computed once and kept, so where ``ζ``, ``I``, ``kT``
+        and ``Δt`` are shared by the bodies (unbatched under `jax.vmap`) the φ-functions run once
+        per step, not once per body (XLA would otherwise fuse them into each body's arithmetic)."""
+        x = friction / moments * dt
+        f = drift_factor(x)
+        c = 0.5 * dt * f
+        s = jnp.min(c)
+        relaxation = relaxation_weights(friction, moments, kT, dt, noise)
+        bridge = None
+        if noise:
+            bridge = noise_scale(kT, friction, dt, moments) * dt * bridge_spread(x)
+        return stage(BAOABWeights(f, s, c - s, dt - 2 * c, bridge, relaxation))
+
     def advance(self, carry, t, dt, inertia, torque, args, fluid, normals):
+        moments = inertia.tensor
+        w = self.weights(fluid.friction, moments, fluid.kT, dt, noise=normals is not None)
+        return self.advance_with(w, carry, t, dt, inertia, torque, args, fluid, normals)
+
+    def advance_with(self, w, carry, t, dt, inertia, torque, args, fluid, normals):
+        """`advance` with the step's `weights` given (computed by the caller, e.g. once for all bodies)."""
         (q, omega), tau, step = carry
         moments = inertia.tensor
         half = 0.5 * dt
-        x = fluid.friction / moments * dt
-        f = drift_factor(x)
-        c = half * f
-        s = jnp.min(c)
         if torque is not None:
-            omega = omega + kick(q, (2 - f) / moments, half * tau)
-        q, omega = self._drift(q, omega, moments, s, c - s, first=True)
+            omega = omega + kick(q, (2 - w.f) / moments, half * tau)
+        q, omega = self._drift(q, omega, moments, w.s, w.extra, first=True)
         spin = quat.rotate(quat.conjugate(q), omega)
         slow = body_flow_rotation(q, fluid)
-        turn = (dt - 2 * c) * slow
+        turn = w.middle * slow
         if normals is not None:
-            a = noise_scale(fluid.kT, fluid.friction, dt, moments)
-            turn = turn + (a * dt * bridge_spread(x)) * normals[3:]
+            turn = turn + w.bridge * normals[3:]
             normals = normals[:3]
-        spin = spin_relaxation(spin, slow, fluid.friction, moments, fluid.kT, dt, normals)
+        spin = relax(spin, slow, w.relaxation, normals)
         q = quat.multiply(q, quat.exp(turn))
-        q, omega = self._drift(q, quat.rotate(q, spin), moments, s, c - s, first=False)
+        q, omega = self._drift(q, quat.rotate(q, spin), moments, w.s, w.extra, first=False)
         q = quat.normalize(q)
         if fluid.velocity_gradient is not None:  # the spin relaxed to S(q_½): (1 − f) of it moved to S(q₁)
-            lag = (1 - f) * (body_flow_rotation(q, fluid) - slow)
+            lag = (1 - w.f) * (body_flow_rotation(q, fluid) - slow)
             omega = omega + quat.rotate(q, lag)
         tau1 = None
         if torque is not None:
-            predicted = omega + kick(q, f / moments, half * tau)
+            predicted = omega + kick(q, w.f / moments, half * tau)
             tau1 = world_torque(torque, t + dt, q, predicted, args)
-            omega = omega + kick(q, f / moments, half * tau1)
+            omega = omega + kick(q, w.f / moments, half * tau1)
         return LangevinCarry(RotState(q, omega), tau1, step + 1)
+
+
+class BAOABWeights(NamedTuple):
+    """`BAOAB`'s weights of one step, per principal axis ``(3,)`` unless said: ``f`` the drift factor
+    ``f(ζΔt/I)``; ``s`` ``()`` the rotor's time ``min_k c_k`` (``c = f Δt/2``); ``extra`` the turns
+    ``c − s``; ``middle`` the flow's share ``Δt − 2c``; ``bridge`` the angle's spread given both spins,
+    ``a Δt √W`` (None without noise); ``relaxation`` the O step's (`jaxrot.schemes._ou.Relaxation`)."""
+
+    f: jax.Array
+    s: jax.Array
+    extra: jax.Array
+    middle: jax.Array
+    bridge: jax.Array | None
+    relaxation: Relaxation
