@@ -55,3 +55,32 @@ def jax_md_cost_table(docs, name="jax_md_cpu.json"):
     header = ["system", "jaxrot.jax_md baoab", "jax_md nvt_langevin", "jaxrot / jax_md"]
     note = f" (median of {data['cost'][0]['rounds']} interleaved rounds of {data['cost'][0]['steps']} steps)"
     return _table(header, rows) + _provenance(name, data["machine"], note)
+
+
+def jax_md_brownian_table(docs, name="jax_md_brownian.json"):
+    """jaxrot.jax_md.brownian against closed forms: Favro's P1, P2 per body axis, the centres' spread, and
+    dipoles' mean cosine against the Langevin function; each with its standard error."""
+    data = _read(docs, name)
+    axes = ("x", "y", "z")
+
+    def cell(value, error, exact):
+        return f"{value:.4f} ± {error:.4f} ({exact:.4f})"
+
+    rows = [
+        [f"t = {r['t']:g}", *(cell(r["p1"][k], r["p1_error"][k], r["p1_favro"][k]) for k in range(3))]
+        + [cell(r["msd_over_6Dt"], r["msd_over_6Dt_error"], 1.0)]
+        for r in data["free"]
+    ]
+    favro = _table(["free body", *(f"⟨P₁⟩ body {a} (Favro)" for a in axes), "centres' msd / 6Dt"], rows)
+    rows = [
+        [f"μB/kT = {r['field_over_kT']:g}", cell(r["cos"], r["cos_error"], r["langevin"])]
+        for r in data["dipole"]
+    ]
+    dipole = _table(["dipole", "⟨cos θ⟩ (Langevin function)"], rows)
+    s = data["setting"]
+    note = (
+        f" ({data['free'][0]['bodies']} bodies, kT = {s['kT']:g},"
+        f" rotational friction {s['rotational_friction']},"
+        f" dt = {data['free'][0]['dt']:g} free and {data['dipole'][0]['dt']:g} in the field; accuracy only)"
+    )
+    return favro + "\n\n" + dipole + _provenance(name, data["machine"], note)

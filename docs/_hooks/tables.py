@@ -39,6 +39,7 @@ from _tables_identify import (  # noqa: E402
     identify_sysid_table,
 )
 from _tables_jax_md import (  # noqa: E402
+    jax_md_brownian_table,
     jax_md_cost_table,
     jax_md_energy_table,
     jax_md_temperature_table,
@@ -97,6 +98,7 @@ TABLES = {
     "jax_md_temperature_table": jax_md_temperature_table,
     "jax_md_energy_table": jax_md_energy_table,
     "jax_md_cost_table": jax_md_cost_table,
+    "jax_md_brownian_table": jax_md_brownian_table,
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "gradient_compile_table": gradient_compile_table,
