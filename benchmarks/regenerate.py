@@ -135,7 +135,17 @@ JOBS = {
     "identify_speed": Job(
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
-        3,
+        8,
+        quick=("benchmarks/identify_speed.py", "--quick", "--json", "docs/identify_speed_cpu.json"),
+        sources=(
+            "benchmarks/identify_speed.py",
+            "tests/_telemetry.py",
+            "tests/_mujoco_telemetry.py",
+            "tests/_mujoco_sysid.py",
+            "jaxrot/_fit",
+            "jaxrot/schemes",
+            "jaxrot/_integrate",
+        ),
     ),
     # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the
     # benchmark says so and writes nothing).
