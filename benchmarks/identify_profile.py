@@ -86,6 +86,7 @@ def main(argv=None):
     shown = _solve.windows(model, settings)
     print(f"{settings.k} experiments, {steps} steps each, J {with_w.jac.shape}; window steps {shown}")
     print(f"optimum as run and through the windows: max |Δφ| {np.max(np.abs(with_w.phi - as_run.phi)):.2g}")
+    print(f"evaluations (residuals + Jacobian): as run {as_run.evaluations}, windows {with_w.evaluations}")
     print("| stage | median [ms] |\n|---|---|")
     for name, values in times.items():
         print(f"| {name} | {1e3 * statistics.median(values):.2f} |")

@@ -68,6 +68,7 @@ class Solution(NamedTuple):
     states: tuple  # (q (k, P + 1, 4), ω (k, P + 1, 3)) the modelled states at the samples
     model: object  # the model with the final σ
     windowed: bool  # whether the start was far and the windows ran
+    evaluations: int  # of the residuals and Jacobian: iterations, passes' starts and rejected trials
 
 
 def windows(model, settings):
@@ -147,6 +148,7 @@ class _Carry(NamedTuple):
     closing: jax.Array  # this evaluation is the last: the whole record after a cap inside a window
     done: jax.Array
     converged: jax.Array
+    evaluations: jax.Array
 
 
 def history_size(max_iter):
@@ -203,6 +205,7 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
         closing=false,
         done=false,
         converged=false,
+        evaluations=zero,
     )
 
     def body(c):
@@ -262,7 +265,7 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
         done = converged | (capped & ~reopen) | c.closing
         return _Carry(
             z, r, jac, aux, f, d, slope, alpha, history, slot, n, rejections, stage, active, sigma, fresh,
-            false, c.windowed | far, reopen, done, converged,
+            false, c.windowed | far, reopen, done, converged, c.evaluations + 1,
         )  # fmt: skip
 
     return jax.lax.while_loop(lambda c: ~c.done, body, carry)
@@ -312,5 +315,5 @@ def solve(problem, settings, speed, *, use_windows=None) -> Solution:
     states = tuple(np.asarray(x, np.float64) for x in end.aux)
     return Solution(
         np.asarray(end.z, np.float64), history, int(end.n), bool(end.converged), raw, jac, states, model,
-        bool(end.windowed),
+        bool(end.windowed), int(end.evaluations),
     )  # fmt: skip
