@@ -224,8 +224,19 @@ JOBS = {
     "identify_speed": Job(
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
-        3,
-        sources=(*BASE, *VACUUM, *DIFFRAX, *FIT, "benchmarks/identify_speed.py"),
+        8,
+        quick=("benchmarks/identify_speed.py", "--quick", "--json", "{tmp}/identify_speed_cpu.json"),
+        quick_minutes=3,
+        tables=("identify_speed_table",),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *DIFFRAX,
+            *FIT,
+            "benchmarks/identify_speed.py",
+            "tests/_mujoco_telemetry.py",
+            "tests/_mujoco_sysid.py",
+        ),
     ),
     # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the
     # benchmark says so and writes nothing).

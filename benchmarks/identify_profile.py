@@ -6,8 +6,9 @@ which every item runs once (interleaved, so a drift of the machine moves all ali
 
 - one Jacobian evaluation of the whole record (residuals + forward-mode tangents) and one residual
   evaluation alone;
-- the Gauss–Newton solve with its growing windows (`_solve.windows`) and without them (the same
-  start, the whole record at once), with the iterations and the largest difference of the optimum;
+- the Gauss–Newton solve (one compiled loop, `_solve`) as `identify` runs it (the windows only for a
+  far start) and forced through the growing windows, with the iterations and the largest difference
+  of the optimum;
 - the uncertainty stage (covariance, identifiability) and the health check (`_health.diagnose`).
 
     python benchmarks/identify_profile.py             # ~1 minute on 2 idle cores
@@ -56,23 +57,20 @@ def main(argv=None):
     problem = build_problem(settings, start)
     model = problem.model
     jacobian, residual = eqx.filter_jit(residuals_and_jacobian), eqx.filter_jit(residuals)
-    windows = _solve.windows
 
-    def solve(with_windows):
-        _solve.windows = windows if with_windows else (lambda model, settings: [])
-        try:
-            return _solve.solve(problem, settings, start.speed)
-        finally:
-            _solve.windows = windows
+    def solve(use_windows):
+        return _solve.solve(problem, settings, start.speed, use_windows=use_windows)
 
-    with_w, without_w = solve(True), solve(False)
+    as_run, with_w = solve(None), solve(True)
     found = uncertainty(with_w, settings)
     z = jnp.asarray(with_w.phi)
     items = {
         "one Jacobian evaluation (whole record)": lambda: jax.block_until_ready(jacobian(z, model)),
         "one residual evaluation (whole record)": lambda: jax.block_until_ready(residual(z, model)),
-        f"solve, growing windows ({with_w.n_iterations} iterations)": lambda: solve(True),
-        f"solve, whole record only ({without_w.n_iterations} iterations)": lambda: solve(False),
+        f"solve as identify runs it (windows: {as_run.windowed}, {as_run.n_iterations} iterations)": (
+            lambda: solve(None)
+        ),
+        f"solve forced through the windows ({with_w.n_iterations} iterations)": lambda: solve(True),
         "uncertainty (covariance, identifiability)": lambda: uncertainty(with_w, settings),
         "health check": lambda: diagnose(settings, with_w, found, problem.estimated),
     }
@@ -85,9 +83,10 @@ def main(argv=None):
             fn()
             times[name].append(time.perf_counter() - t)
     steps = model.data.step_start.shape[1]
-    shown = windows(model, settings)
+    shown = _solve.windows(model, settings)
     print(f"{settings.k} experiments, {steps} steps each, J {with_w.jac.shape}; window steps {shown}")
-    print(f"optimum with and without windows: max |Δφ| {np.max(np.abs(with_w.phi - without_w.phi)):.2g}")
+    print(f"optimum as run and through the windows: max |Δφ| {np.max(np.abs(with_w.phi - as_run.phi)):.2g}")
+    print(f"evaluations (residuals + Jacobian): as run {as_run.evaluations}, windows {with_w.evaluations}")
     print("| stage | median [ms] |\n|---|---|")
     for name, values in times.items():
         print(f"| {name} | {1e3 * statistics.median(values):.2f} |")

@@ -31,6 +31,7 @@ often the 95 % intervals of the six inertia elements hold the truth. Skipped wit
 ``mujoco[sysid]`` is not installed (``pip install -e ".[mujoco]"``).
 
     python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo
+    python benchmarks/identify_speed.py --quick  # 2 rounds, 1 MuJoCo seed, one optimistix tolerance
     python benchmarks/identify_speed.py --json docs/identify_speed_cpu.json  # the file the docs render
 """
 
@@ -237,7 +238,14 @@ def main(argv=None):
     parser.add_argument(
         "--mujoco-seeds", type=int, default=4, help="noise seeds of the MuJoCo comparison (0: skip)"
     )
+    parser.add_argument("--rounds", type=int, default=7, help="interleaved timing rounds (median)")
+    parser.add_argument(
+        "--quick", action="store_true", help="2 rounds, 1 MuJoCo seed, optimistix at tolerance 1e-6 only"
+    )
     opts = parser.parse_args(argv)
+    if opts.quick:
+        opts.rounds, opts.mujoco_seeds = 2, min(opts.mujoco_seeds, 1)
+    tolerances = (1e-6,) if opts.quick else (1e-4, 1e-6, 1e-10)
     info = machine_info()
     print(info)
     experiments, _ = satellite_experiments(0)
@@ -313,7 +321,7 @@ def main(argv=None):
         for opt_name, optimiser in [
             (f"{kind.__name__} tol {tol:g}", kind(rtol=tol, atol=tol))
             for kind in (optx.GaussNewton, optx.LevenbergMarquardt)
-            for tol in (1e-4, 1e-6, 1e-10)
+            for tol in tolerances
         ]:
 
             def solve(p0, optimiser=optimiser, model=model):
@@ -336,7 +344,7 @@ def main(argv=None):
             gap = float(np.max(np.abs(theirs - ours) / se))
             label = f"diffrax {solver_name} dt = {step:g} s + optimistix {opt_name} ({int(n_opt)} steps)"
             rows.append([label, first_d, None, loss, gap, error])
-    for row, median in zip(rows, interleaved_medians(fns), strict=True):
+    for row, median in zip(rows, interleaved_medians(fns, opts.rounds), strict=True):
         row[2] = median
     run = rows[0][2]
     print()
@@ -355,7 +363,8 @@ def main(argv=None):
     mujoco = mujoco_rows(opts.mujoco_seeds) if opts.mujoco_seeds else None
     if opts.json:
         keys = ("fit", "first_call_s", "compiled_s", "loss", "max_gap_se", "model_error_rad")
-        out = {"machine": info, "rows": [dict(zip(keys, r, strict=True)) for r in rows]}
+        out = {"machine": info, "rounds": opts.rounds}
+        out["rows"] = [dict(zip(keys, r, strict=True)) for r in rows]
         if mujoco is not None:
             out["mujoco"] = mujoco
         with open(opts.json, "w") as f:

@@ -52,6 +52,34 @@ def test_satellite_inertia_dipole_and_states_within_their_standard_errors(satell
 
 
 @pytest.mark.slow
+def test_a_close_start_skips_the_windows_for_the_same_optimum(satellite):
+    """The satellite's linear-estimate start is 0.33–0.52 rad off the data (close: under `CLOSE_ANGLE`),
+    so the fit runs on the whole record at once. Forced through the windows it stops at the same
+    optimum: each run stops once the predicted decrease is ≤ ftol · f, i.e. within √(ftol · f) standard
+    errors of the optimum along any direction (f ≈ 2.1e3: 4.6e-4), so the two differ by < 1e-3 standard
+    errors in every coordinate of φ. One compiled loop serves both (``use_windows`` is a runtime value)."""
+    from jaxrot._fit._identify._check import check_arguments
+    from jaxrot._fit._identify._problem import build_problem
+    from jaxrot._fit._identify._solve import solve
+    from jaxrot._fit._identify._start import starting_point
+
+    experiments, _, fit = satellite
+    settings = check_arguments(
+        experiments, torque=dipole_torque, args={"dipole": jnp.zeros(3)}, free_args={"dipole": True},
+        inertia0=None, free_inertia=True, scheme=None, dt=None, q0=None, omega0=None, max_iter=100,
+        ftol=1e-10, rcond=None, sensors=None,
+    )  # fmt: skip
+    start = starting_point(settings)
+    problem = build_problem(settings, start)
+    close = solve(problem, settings, start.speed)
+    windowed = solve(problem, settings, start.speed, use_windows=True)
+    assert not close.windowed and windowed.windowed and close.converged and windowed.converged
+    assert close.n_iterations == fit.n_iterations < windowed.n_iterations
+    se = np.sqrt(np.diag(np.linalg.inv(close.jac.T @ close.jac)))
+    assert np.all(np.abs(close.phi - windowed.phi) < 1e-3 * se)
+
+
+@pytest.mark.slow
 def test_covariance_labels_and_correlations(satellite):
     _, _, fit = satellite
     assert fit.names[:6] == (

@@ -78,6 +78,33 @@ def test_noise_free_real_sensors_are_fitted_to_1e_6_relative(noise_free):
     assert {"sensors.gyro_bias[2,1]", "sensors.gyro_delay", "args.drag[1]"} <= set(fit.names)
 
 
+def test_a_far_start_runs_the_windows_and_a_close_one_the_whole_record(noise_free):
+    """The all-flaws start is 1.5–2.0 rad off the data (far: over `CLOSE_ANGLE`), so the fit runs its
+    windows; restarted at its own optimum (close) it skips them and stays there (to 1e-10 relative:
+    Gauss–Newton's step at the optimum of noise-free data is round-off). The same compiled loop as the
+    fixture's (``use_windows`` and the start are runtime values)."""
+    from jaxrot._fit._identify._check import check_arguments
+    from jaxrot._fit._identify._problem import build_problem
+    from jaxrot._fit._identify._solve import solve
+    from jaxrot._fit._identify._start import starting_point
+
+    experiments, _, fit = noise_free
+    settings = check_arguments(
+        experiments, torque=sensor_torque,
+        args={"dipole": jnp.zeros(3), "thruster": jnp.zeros(3), "drag": jnp.asarray(0.0)},
+        free_args={"dipole": True, "drag": "per_experiment"}, inertia0=None, free_inertia=True, scheme=None,
+        dt=2.5, q0=None, omega0=None, max_iter=100, ftol=1e-10, rcond=None,
+        sensors={name: True for name in TRUE_SENSORS},
+    )  # fmt: skip
+    start = starting_point(settings)
+    problem = build_problem(settings, start)
+    far = solve(problem, settings, start.speed)
+    assert far.windowed and far.converged and far.n_iterations == fit.n_iterations
+    close = solve(problem._replace(phi0=far.phi), settings, start.speed)
+    assert not close.windowed and close.converged
+    np.testing.assert_allclose(close.phi, far.phi, rtol=1e-10, atol=1e-10 * np.max(np.abs(far.phi)))
+
+
 def test_summary_and_residual_figure(noise_free):
     _, _, fit = noise_free
     text = fit.summary()

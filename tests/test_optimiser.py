@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxrot._fit._optimiser import MAX_REJECTIONS, _least_squares_step, gauss_newton
+from jaxrot._fit._optimiser import MAX_REJECTIONS, _least_squares_step, gauss_newton, triangular_factor
 
 
 def arctan_residual(z, data):
@@ -82,6 +82,25 @@ def test_least_squares_step_is_numpys_lstsq(shape):
     for minimum_norm in (True, False):
         d = jax.jit(_least_squares_step, static_argnums=2)(jac, r, minimum_norm)
         np.testing.assert_allclose(d, expected, rtol=0, atol=bound)
+
+
+def test_triangular_factor_is_lapacks_up_to_row_signs():
+    """`triangular_factor` (Householder in jax.numpy, not LAPACK's threaded ``geqrf``) against
+    `np.linalg.qr`: both backward stable, so ``R`` agrees up to the sign of each row within a few
+    ``m n eps`` of its largest entry (1e3 eps here: m n eps = 1.3e-12 would be the crude bound, the
+    error is in fact ~1e-15); ``RᵀR = AᵀA`` as well; a zero column stays zero and finite."""
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(300, 8)) * np.logspace(0, 5, 8)
+    a[:, 3] = 0.0
+    upper = np.asarray(jax.jit(triangular_factor)(jnp.asarray(a)))
+    expected = np.linalg.qr(a, mode="r")
+    signs = np.where(np.sign(np.diag(upper)) == np.sign(np.diag(expected)), 1.0, -1.0)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(
+        upper, signs[:, None] * expected, rtol=0, atol=1e3 * np.finfo(float).eps * scale
+    )
+    np.testing.assert_allclose(upper.T @ upper, a.T @ a, rtol=0, atol=1e3 * np.finfo(float).eps * scale**2)
+    assert np.all(np.isfinite(upper)) and np.all(upper[:, 3] == 0) and np.all(np.tril(upper, -1) == 0)
 
 
 def test_least_squares_step_of_a_rank_deficient_jacobian_is_the_minimum_norm_one():

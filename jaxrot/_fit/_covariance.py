@@ -17,6 +17,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._optimiser import triangular_factor
+
 
 # A parameter is named in an undetermined direction when it moves by at least this fraction of
 # the direction's largest move (each measured in units of the parameter's own scale).
@@ -70,7 +72,7 @@ def _scaled_svd(jac):
     """
     norms = jnp.linalg.norm(jac, axis=0)
     d = jnp.where(norms > 0, 1 / jnp.where(norms > 0, norms, 1), 1.0)
-    upper = jnp.linalg.qr(jac, mode="r")
+    upper = triangular_factor(jac) if jac.shape[0] >= jac.shape[1] else jnp.linalg.qr(jac, mode="r")
     _, s, vt = jnp.linalg.svd(upper * d[None, :], full_matrices=False)
     return d, s, vt, jnp.linalg.svd(upper, compute_uv=False)
 

@@ -16,6 +16,7 @@ from ..._inertia import check_inertia_values
 from ..._integrate._bind import INERTIAL, scheme_for_call
 from ..._validation import check_int, check_torque
 from ._experiment import KINDS, Experiment
+from ._scheme import DEFAULT_SCHEME
 from ._sensors import check_sensors
 
 
@@ -54,6 +55,7 @@ class Settings(NamedTuple):
     dtype: Any
     counts: np.ndarray  # (k, 3) observed samples per experiment and kind
     n_params: int
+    scheme_default: bool = False  # the user named no scheme: `_scheme.choose_scheme` may size it
 
     @property
     def k(self) -> int:
@@ -173,6 +175,8 @@ def check_arguments(
     experiments = tuple(experiments)
     k = len(experiments)
     check_torque(torque)
+    scheme_default = scheme is None
+    scheme = DEFAULT_SCHEME if scheme is None else scheme
     scheme_obj, _ = scheme_for_call(scheme, INERTIAL)  # a body in vacuum: the model identify fits
     max_iter = check_int(max_iter, "max_iter", 1)
     if free_inertia not in (True, False, "moments"):
@@ -268,6 +272,7 @@ def check_arguments(
     return Settings(
         experiments, torque, args, treedef, tuple(leaves), scheme_obj, scheme, free_inertia, inertia0,
         unit_scale, sensors, q0, omega0, dt, max_iter, float(ftol), rcond, dtype, counts, n_params,
+        scheme_default,
     )  # fmt: skip
 
 

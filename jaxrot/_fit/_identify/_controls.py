@@ -55,7 +55,10 @@ def step_grid(t, control, hold, max_step) -> StepGrid:
     if control is not None:
         t_c = np.asarray(control[0], np.float64)
         inside = t_c[(t_c > t[0] + tol) & (t_c < t[-1] - tol)]
-        nearest = np.abs(inside[:, None] - t[None, :]).min(axis=1) if inside.size else inside
+        # The nearest sample time by bisection (t is increasing): the dense |inside − t| table of
+        # 10 000 control times by 1 001 samples took ~1 s per experiment.
+        right = np.clip(np.searchsorted(t, inside), 1, t.size - 1)
+        nearest = np.minimum(np.abs(inside - t[right - 1]), np.abs(t[right] - inside))
         nodes = np.union1d(t, inside[nearest > tol])
     gaps = np.diff(nodes)
     counts = np.maximum(1, np.ceil(gaps / max_step * (1 - 1e-12))).astype(int)

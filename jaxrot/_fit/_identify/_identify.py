@@ -10,19 +10,18 @@ the uncertainty (`_uncertainty`) → the result, an `Identification` (`_result`,
 import warnings
 from collections.abc import Sequence
 
-from ...schemes import RKMKDopri5
 from ._check import check_arguments
 from ._experiment import Experiment
 from ._health import FitWarning, diagnose
 from ._problem import build_problem
 from ._result import Identification, result
+from ._scheme import (
+    DEFAULT_SCHEME as DEFAULT_SCHEME,  # re-exported: the benchmarks name it
+    choose_scheme,
+)
 from ._solve import solve
 from ._start import starting_point
 from ._uncertainty import uncertainty
-
-
-# The default scheme: see `identify`'s docstring for the measurements behind it.
-DEFAULT_SCHEME = RKMKDopri5(chart="cayley")
 
 
 def identify(
@@ -33,7 +32,7 @@ def identify(
     free_args=None,
     inertia0=None,
     free_inertia: bool | str = True,
-    scheme=DEFAULT_SCHEME,
+    scheme=None,
     dt: float | None = None,
     q0=None,
     omega0=None,
@@ -71,7 +70,10 @@ def identify(
     determined: it keeps the trace of ``inertia0``.
 
     Optimiser: the Gauss–Newton of `fit_inertia` (forward-mode Jacobian through
-    the rollout, Armijo backtracking, one compiled loop). Noise: a kind whose σ
+    the rollout, Armijo backtracking), every pass in one compiled loop: a start whose
+    modelled orientations are more than 1 rad off the data (or gyro rates off by their size)
+    is first fitted over growing windows of the records, a closer one over the whole
+    records at once (`_identify._solve`). Noise: a kind whose σ
     is None has it estimated from its residuals,
     ``σ² = RSS_kind / (m_kind (1 − n/m))`` (``m`` informative residuals, ``n``
     parameters); when several kinds are weighed against each other the fit is
@@ -129,12 +131,17 @@ def identify(
             ``(3,)``; None: a linear angular-momentum estimate from the
             experiment with the most orientation samples.
         free_inertia: True, ``"moments"`` or False (see above).
-        scheme: integrator name or object.
+        scheme: integrator name or object; None: the default above, or, when the controls' sample times
+            force steps shorter than half the default's and every σ is given, the cheapest of ``zhao``,
+            ``rkmk4`` (Cayley chart) and the default whose error on the start's model keeps every
+            parameter's bias below 0.1 standard error (`_identify._scheme`; the summary names the
+            choice and its measured error).
         dt: largest step (each sample interval is cut into equal steps).
         q0, omega0: starting initial states ``(k, 4)``, ``(k, 3)`` instead of
             those read from the data (needed when a record starts far from
             anything its observations suggest).
-        max_iter: Gauss–Newton iteration cap (per pass).
+        max_iter: the cap on Gauss–Newton iterations of the whole call (windows, the whole record
+            and the refit with estimated σ together).
         ftol: stop when the next step's predicted decrease is ``≤ ftol ×`` the
             objective, or the objective is at the round-off floor.
         rcond: singular-value ratio below which a direction is undetermined.
@@ -190,6 +197,7 @@ def identify(
     )  # fmt: skip
     start = starting_point(settings)
     problem = build_problem(settings, start)
+    problem, choice = choose_scheme(settings, problem, start.max_step)
     solution = solve(problem, settings, start.speed)
     found = uncertainty(solution, settings)
     health = diagnose(settings, solution, found, problem.estimated)
@@ -214,4 +222,4 @@ def identify(
             FitWarning,
             stacklevel=2,
         )
-    return result(settings, problem, solution, found, health.problems)
+    return result(settings, problem, solution, found, health.problems, choice)

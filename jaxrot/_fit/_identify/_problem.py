@@ -23,6 +23,7 @@ class Problem(NamedTuple):
     phi0: np.ndarray  # float64
     estimated: np.ndarray  # (k, 3) bool: σ of this experiment and kind to be estimated
     max_step: float  # the longest model step
+    held: bool  # some control is held (zero-order hold): a scheme that carries a torque restarts per step
 
 
 def _inertia_coordinates(settings, start):
@@ -163,4 +164,4 @@ def build_problem(settings, start) -> Problem:
     phi0 = np.concatenate([*head, *blocks]).astype(np.float64)
     assert phi0.size == settings.n_params and n_head(layout) == sum(h.size for h in head)
     max_step = max(float(np.max(g.length)) for g in grids)
-    return Problem(model, phi0, estimated, max_step)
+    return Problem(model, phi0, estimated, max_step, held)

@@ -68,6 +68,8 @@ def summary(fit) -> str:
         f"{scheme_label(fit.scheme)}, largest step {fit.dt:.3g}",
         UNIT_LEGEND,
     ]
+    if fit.scheme_note:
+        lines.insert(len(lines) - 1, f"scheme {fit.scheme_note}")
     if not fit.scale_determined:
         lines.append("no torque fixes the inertia's scale: it keeps the trace of inertia0 (shape only)")
     se = np.sqrt(np.maximum(np.diag(fit.covariance), 0))

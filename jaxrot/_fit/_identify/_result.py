@@ -66,11 +66,12 @@ class Identification(NamedTuple):
             observed kind (NaN where a sample is missing).
         trajectories: per experiment, the fitted model at its sample times (`Trajectory`).
         loss: final sum of squared whitened residuals.
-        loss_history: the sum before each Gauss–Newton iteration and at the end.
-        n_iterations: Gauss–Newton iterations (both passes when σ was estimated).
+        loss_history: the sum at each accepted iterate (each pass's start included) and at the end.
+        n_iterations: Gauss–Newton iterations of the whole call (every pass; what ``max_iter`` bounds).
         scale_determined: whether a torque fixes the tensor's scale.
         dt: the largest integrator step used.
-        scheme: the scheme's name or object.
+        scheme: the scheme's name or object (the one `identify` chose when it was left to it).
+        scheme_note: why `identify` chose a scheme other than its default (empty otherwise).
     """
 
     inertia: jax.Array
@@ -97,6 +98,7 @@ class Identification(NamedTuple):
     scale_determined: bool
     dt: float
     scheme: Any
+    scheme_note: str = ""
 
     def summary(self) -> str:
         """A report a person reads: each parameter ± its standard error in its units, the strongest
@@ -125,7 +127,7 @@ class Identification(NamedTuple):
         return _report.plot_residuals(self)
 
 
-def result(settings, problem, solution, found, problems=()) -> Identification:
+def result(settings, problem, solution, found, problems=(), choice=None) -> Identification:
     """The `Identification` of a solved problem (`_solve.Solution`) and its `_uncertainty.Uncertainties`."""
     dtype = settings.dtype
     data = solution.model.data
@@ -176,5 +178,6 @@ def result(settings, problem, solution, found, problems=()) -> Identification:
         n_iterations=solution.n_iterations,
         scale_determined=not settings.unit_scale,
         dt=problem.max_step,
-        scheme=settings.scheme_arg,
+        scheme=settings.scheme_arg if choice is None or not choice.note else choice.scheme,
+        scheme_note="" if choice is None else choice.note,
     )
