@@ -163,7 +163,7 @@ class LoadWatch:
 
 
 def annotate(path, sources, load):
-    """Add ``sources`` (blob hashes) and ``load`` to the results file's ``machine`` block; a results file
+    """Add ``sources`` (fingerprints) and ``load`` to the results file's ``machine`` block; a results file
     without one (a figure, a list) is left as it is. Returns whether it was annotated."""
     try:
         text = Path(path).read_text()

@@ -67,6 +67,8 @@ THERMAL = (
 DIFFRAX = ("jaxrot/_diffrax",)
 SCENES = ("jaxrot/scenes", "jaxrot/analytic.py")
 FIT = ("jaxrot/_fit", "tests/_telemetry.py")
+# The race's scenes: each draws its work-precision figure beside the race's results file.
+RACE_SCENES = ("heavy_top", "viscous_drag", "dipole_rotating_field")
 JAX_MD = (*BASE, *VACUUM, *THERMAL, *FLUID, "jaxrot/jax_md", "benchmarks/jax_md_systems.py")
 
 
@@ -79,7 +81,7 @@ JOBS = {
         sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "jaxrot/comparison/_ladder.py", "jaxrot/__main__.py"),
     ),
     "race64": Job(
-        ("race_cpu/race_float64.json",),
+        ("race_cpu/race_float64.json", *(f"race_cpu/race_{scene}_float64.png" for scene in RACE_SCENES)),
         ("benchmarks/race.py", "--repeats", "3", "--time-cap", "1.0", "--out", "docs/race_cpu"),
         31,
         True,
@@ -91,7 +93,7 @@ JOBS = {
     # Draws only: the headline figure of README and the home page, from race64's results.
     "headline": Job(("headline.png",), ("benchmarks/headline.py",), 0.1, timed=False),
     "race32": Job(
-        ("race_cpu/race_float32.json",),
+        ("race_cpu/race_float32.json", *(f"race_cpu/race_{scene}_float32.png" for scene in RACE_SCENES)),
         (
             "benchmarks/race.py",
             "--dtype",
@@ -126,7 +128,7 @@ JOBS = {
         ("compile_cpu.json",),
         ("benchmarks/compile.py",),
         8,
-        sources=(*BASE, *VACUUM, "benchmarks/compile.py"),
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/compile.py"),
     ),
     "throughput": Job(
         ("throughput_cpu.json",),
@@ -198,7 +200,14 @@ JOBS = {
         ("stability_cpu.json",),
         ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"),
         5,
-        sources=(*BASE, *VACUUM, "jaxrot/stability.py", "benchmarks/stability.py"),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *SCENES,
+            "jaxrot/stability.py",
+            "jaxrot/diagnostics.py",
+            "benchmarks/stability.py",
+        ),
         timed=False,
     ),
     # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
@@ -206,7 +215,7 @@ JOBS = {
         ("order4.json",),
         ("benchmarks/order4.py", "--json", "docs/order4.json"),
         9,
-        sources=(*BASE, *VACUUM, "benchmarks/order4.py"),
+        sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/order4.py"),
         timed=False,
     ),
     # Accuracy only: each scheme's float32 run against its float64 run (docs/stability.md).
@@ -218,7 +227,7 @@ JOBS = {
         quick=("benchmarks/float32.py", "--steps", "20000", "--json", "{tmp}/float32_horizon.json"),
         quick_minutes=3,
         tables=("float32_horizon_table",),
-        sources=(*BASE, *VACUUM, *DIFFRAX, "benchmarks/float32.py"),
+        sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/float32.py"),
         timed=False,
     ),
     "identify_speed": Job(
@@ -264,7 +273,7 @@ JOBS = {
         ),
         quick_minutes=8,
         tables=("mujoco_free_body_speed",),
-        sources=(*BASE, *VACUUM, "benchmarks/mujoco_free_body.py"),
+        sources=(*BASE, *VACUUM, "jaxrot/analytic.py", "benchmarks/mujoco_free_body.py"),
     ),
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
     "thermal_orders": Job(
@@ -324,7 +333,13 @@ JOBS = {
         ("rotor_choice_cpu.json",),
         ("benchmarks/rotor.py", "--choice-only", "--rounds", "61", "--json", "docs/rotor_choice_cpu.json"),
         1.5,
-        sources=(*BASE, *ROTOR, "benchmarks/rotor.py"),
+        sources=(
+            *BASE,
+            *ROTOR,
+            "jaxrot/schemes/splitting.py",
+            "jaxrot/schemes/_rkn_splitting.py",
+            "benchmarks/rotor.py",
+        ),
     ),
     # Bodies in a fluid (docs/fluid.md): the orders (accuracy only) and the race against diffrax.
     "fluid_orders": Job(
@@ -391,6 +406,6 @@ JOBS = {
             "{tmp}/fluid_step_cost_cpu.json",
         ),
         quick_minutes=1,
-        sources=(*BASE, *VACUUM, *FLUID, "benchmarks/fluid_step_cost.py"),
+        sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/fluid_step_cost.py"),
     ),
 }

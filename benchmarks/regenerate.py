@@ -3,7 +3,7 @@
 Every table and figure of README.md and the documentation site is rendered (by
 ``docs/_hooks/tables.py``) from a results file under ``docs/``, and each results file records
 the machine, the versions, the commit and the date it was measured on
-(`jaxrot.comparison.machine_info`), and, once written through this script, the git blob hash of every
+(`jaxrot.comparison.machine_info`), and, once written through this script, a fingerprint of every
 source file its numbers depend on (``machine["sources"]``: the job's ``sources``) and what the rest of
 the machine computed meanwhile (``machine["load"]``). This script reruns the benchmarks that write them,
 one after another in fresh processes, printing its plan with each job's expected time first.

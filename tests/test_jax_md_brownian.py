@@ -189,6 +189,20 @@ def test_bad_input_is_refused_before_compiling(call, message):
         call(systems.free_energy, shift)
 
 
+@pytest.mark.parametrize("simulator", ["brownian", "nvt_langevin"])
+def test_per_body_friction_of_another_length_is_refused_while_tracing(simulator):
+    """A ``(M, 3)`` friction for N ≠ M bodies passes the construction check (N is not known then) and is
+    refused with a ValueError when the first step is traced, before XLA compiles it (not a shape error
+    from inside vmap)."""
+    _, shift, body = systems.free_system(4)
+    init_fn, apply_fn = getattr(jm, simulator)(
+        systems.free_energy, shift, 1e-3, KT, rotational_friction=jnp.ones((3, 3))
+    )
+    state = init_fn(jax.random.key(0), body, mass=systems.shape().mass())
+    with pytest.raises(ValueError, match="3 rows but there are 4 bodies"):
+        apply_fn(state)
+
+
 def test_langevin_friction_per_axis_sets_each_axis_rate():
     """`nvt_langevin(..., rotational_friction=ζ)`: 4000 free tetrahedra at rest, one step of dt = 0.01 with
     ζ_l / I_l = (50, 200, 12.5): each axis heats to ⟨L_l²/I_l⟩ = kT (1 − e^{−2 ζ_l Δt / I_l}) = (0.632,

@@ -114,6 +114,9 @@ def brownian(
             angular velocity, ``(3,)`` shared or ``(N, 3)`` per body, as `jaxrot.Fluid`'s ``friction``
             (Perrin's for a spheroid: ``jaxrot.Fluid.spheroid``): diffusion ``kT / ζ_l`` about axis
             ``l``. It replaces ``gamma``'s rotational part. None (default): ``gamma``'s.
+            The axes are jax_md's principal axes, in ascending order of the moments: a prolate
+            spheroid's long axis is body x there, so its ``Fluid.spheroid(...).friction`` (symmetry
+            axis last) goes in reversed.
 
     Returns:
         ``(init_fn, apply_fn)``: ``init_fn(key, R, mass=shape.mass())`` is jax_md's own

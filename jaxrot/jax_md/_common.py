@@ -143,6 +143,12 @@ def rotational_friction(gamma_orientation, friction, moments, q):
     axis, body axis ``l`` relaxing at jax_md's rate ``G M / (4 I_l)``, ``M = 4 / Σ_k 1/I_k``."""
     dtype = q.dtype
     if friction is not None:
+        # Shapes are known while tracing, before XLA compiles: a per-body friction of another length.
+        if np.ndim(friction) == 2 and np.shape(friction)[0] != q.shape[0]:
+            raise ValueError(
+                f"`rotational_friction` has {np.shape(friction)[0]} rows but there are {q.shape[0]} bodies: "
+                "give (N, 3), one row per body, or (3,) shared."
+            )
         return jnp.asarray(friction, dtype)
     g = jnp.asarray(gamma_orientation, dtype)
     if moments.ndim == 1 and g.ndim == 0:

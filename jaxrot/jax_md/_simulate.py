@@ -147,6 +147,9 @@ def nvt_langevin(
             (Perrin's for a spheroid: ``jaxrot.Fluid.spheroid``): axis ``l`` relaxes at ``ζ_l / I_l``.
             It replaces ``gamma``'s rotational part, which jax_md makes the same on every axis
             (jax_md refuses a friction per axis). None (default): ``gamma``'s.
+            The axes are jax_md's principal axes, in ascending order of the moments: a prolate
+            spheroid's long axis is body x there, so its ``Fluid.spheroid(...).friction`` (symmetry
+            axis last) goes in reversed.
 
     Returns:
         ``(init_fn, apply_fn)``: ``init_fn(key, R, mass=shape.mass(), momenta=None, **kwargs)`` is
