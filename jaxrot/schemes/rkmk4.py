@@ -32,8 +32,8 @@ class RKMK4(AbstractLieRungeKutta):
     kept to the method's order rather than exactly; ``RKMK4(momentum_frame="world")`` keeps it
     exactly (the scheme before).
 
-    The same name integrates the overdamped model (`jaxrot.overdamped_rollout`, its default without
-    a key): the tableau then advances the orientation alone (`overdamped`).
+    The same name integrates the overdamped model (`jaxrot.overdamped_rollout`, its default at
+    kT = 0): the tableau then advances the orientation alone (`overdamped`).
 
     Reference: H. Munthe-Kaas, BIT 38, 92–111 (1998); Kutta (1901).
 
