@@ -241,7 +241,7 @@ def main(argv=None):
     parser.add_argument("--bodies", type=int, default=4000, help="free bodies for the temperatures")
     parser.add_argument("--snapshots", type=int, default=40, help="snapshots per temperature")
     parser.add_argument(
-        "--quick", action="store_true", help="the cost table only (fewer bodies), printed; written only to a given --out"
+        "--quick", action="store_true", help="the cost table only; written to --out if not docs/"
     )
     parser.add_argument("--out", default=str(ROOT / "docs" / "jax_md_cpu.json"))
     parser.add_argument("--plot-only", action="store_true", help="redraw the figure from --out and exit")
