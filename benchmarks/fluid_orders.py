@@ -188,7 +188,9 @@ def table(rows):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="2 Stokes numbers, 3 rungs; written to --out if not docs/")
+    parser.add_argument(
+        "--quick", action="store_true", help="2 Stokes numbers, 3 rungs; written to --out if not docs/"
+    )
     parser.add_argument("--out", default=str(ROOT / "docs" / "fluid_orders.json"))
     ns = parser.parse_args(argv)
     stokes_numbers = (1.0, 1e-6) if ns.quick else (1.0, 1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8)
