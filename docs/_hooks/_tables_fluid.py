@@ -63,6 +63,28 @@ def overdamped_cost_table(docs, name="overdamped_cost_cpu.json"):
     return _table(header, rows) + _provenance(name, data["machine"], f" ({data['steps']} steps)")
 
 
+def fluid_step_cost_table(docs, name="fluid_step_cost_cpu.json"):
+    """`benchmarks/fluid_step_cost.py`: one exponential step in the race's fluid against rkmk4's with the
+    same physics as a torque callable, wall and CPU time per body-step."""
+    path = Path(docs) / name
+    if not path.exists():
+        return "*Not measured yet: `python benchmarks/regenerate.py --only fluid_step_cost`.*"
+    data = _read(docs, name)
+    header = ["step", "ns per body-step", "× rkmk4", "CPU ns per body-step", "CPU × rkmk4"]
+    rows = [
+        [
+            r["scheme"],
+            f"{r['ns_per_body_step']:.1f}",
+            f"{r['vs_rkmk4']:.2f}",
+            f"{r['cpu_ns_per_body_step']:.1f}",
+            f"{r['cpu_vs_rkmk4']:.2f}",
+        ]
+        for r in data["rows"]
+    ]
+    note = f" ({data['bodies']} bodies, St = {data['stokes']:g}, median of {data['rounds']} interleaved rounds)"
+    return _table(header, rows) + _provenance(name, data["machine"], note)
+
+
 def fluid_race_table(docs, name="fluid_race_cpu.json"):
     """The race in a fluid (`benchmarks/fluid_race.py`): per Stokes number and budget, the fastest row
     of each side and their ratio; a placeholder until the benchmark has written its results file."""

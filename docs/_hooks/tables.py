@@ -32,6 +32,7 @@ from _tables_fluid import (  # noqa: E402
     fluid_race_figure,
     fluid_race_notes,
     fluid_race_table,
+    fluid_step_cost_table,
     overdamped_cost_table,
 )
 from _tables_identify import (  # noqa: E402
@@ -90,6 +91,7 @@ TABLES = {
     "fluid_layer_table": fluid_layer_table,
     "fluid_race_figure": fluid_race_figure,
     "fluid_race_table": fluid_race_table,
+    "fluid_step_cost_table": fluid_step_cost_table,
     "fluid_race_notes": fluid_race_notes,
     "thermal_orders_table": thermal_orders_table,
     "thermal_orders_gpu_table": lambda docs: thermal_orders_table(docs, "gpu_h200/thermal_orders.json"),
