@@ -81,7 +81,9 @@ def fluid_step_cost_table(docs, name="fluid_step_cost_cpu.json"):
         ]
         for r in data["rows"]
     ]
-    note = f" ({data['bodies']} bodies, St = {data['stokes']:g}, median of {data['rounds']} rounds, interleaved)"
+    rounds = data["rounds"]
+    note = f" ({data['bodies']} bodies, St = {data['stokes']:g}, medians of {rounds} interleaved rounds)"
+
     return _table(header, rows) + _provenance(name, data["machine"], note)
 
 
