@@ -8,13 +8,14 @@ ladder of steps against a reference: `jaxrot.reference_rollout` given the same t
 callable where the friction is not stiff, a 16× finer run where it is.
 """
 
+import functools
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import fitted_order, fixed_step_advance
+from helpers import fitted_order
 from scipy.integrate import quad
 
 import jaxrot
@@ -24,6 +25,7 @@ from jaxrot._fluid._fluid import check_fluid
 from jaxrot._integrate._overdamped import velocity_field
 from jaxrot.comparison._fluid import FLUID_ROWS
 from jaxrot.schemes import OVERDAMPED_SCHEMES
+from jaxrot.schemes._base import advance as advance_step
 from jaxrot.schemes._exponential import FluidArgs
 from jaxrot.schemes._phi import phi_functions
 
@@ -64,18 +66,28 @@ def on_slow_manifold(torque=None, args=None):
     return jaxrot.RotState(Q0, spheroid_fluid().angular_velocity(Q0, tau))
 
 
-def fluid_advance(name, inertia, torque=None, args=None, fluid=None, dtype=jnp.float64):
-    """`fixed_step_advance` of the fluid form of ``name``: one compilation for any dt and n."""
-    values, _ = check_fluid(spheroid_fluid(dtype) if fluid is None else fluid, (), dtype)
+@functools.cache
+def magnet_in_shear_runner(name):
+    """``run(state, inertia, dt, n) -> q``: ``n`` steps of the fluid form of ``name`` from t = 0 (its
+    graded start included), the spheroid in shear with `magnetic_torque`, as `fixed_step_advance` takes
+    them (the scheme's own init/step in a ``fori_loop``). The inertia, dt and n are runtime values: one
+    compilation per scheme serves every Stokes number and step."""
+    values, _ = check_fluid(spheroid_fluid(), (), jnp.float64)
     scheme = jaxrot.FLUID_SCHEMES[name].in_fluid()
-    return fixed_step_advance(scheme, inertia, torque, FluidArgs(args, values))
+    args = FluidArgs(MAGNET, values)
 
+    @jax.jit
+    def run(state, inertia, dt, n):
+        inertia = jaxrot.body_inertia(inertia)
+        t0 = jnp.zeros_like(dt)
+        carry = scheme.init(state, t0, inertia, magnetic_torque, args)
 
-def final_errors(advance, state, t_end, steps, reference_q):
-    init, run, to_state = advance
-    return np.array(
-        [float(quat.angle_between(to_state(run(init(state), 0, t_end / n, n)).q, reference_q)) for n in steps]
-    )
+        def step(i, c):
+            return advance_step(scheme, c, i, i.astype(dt.dtype) * dt, t0, dt, inertia, magnetic_torque, args)
+
+        return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
+
+    return lambda state, inertia, dt, n: run(state, inertia, jnp.asarray(dt), jnp.asarray(n))
 
 
 # --- Fluid, Perrin, φ ---------------------------------------------------------------------------
@@ -333,14 +345,13 @@ def test_orders_with_a_fluid(name, stokes, stokes_one_reference):
     same scheme at a 16th of the finest step at St = 1e-6 (where Dopri8 would need 1e6 steps)."""
     inertia = spheroid_inertia(stokes)
     state = on_slow_manifold(magnetic_torque, MAGNET)
-    advance = fluid_advance(name, inertia, magnetic_torque, MAGNET)
+    run = magnet_in_shear_runner(name)  # one program for both Stokes numbers
     steps = np.array([16, 32, 64, 128]) if name == "exp_rk4" else np.array([32, 64, 128, 256])
     if stokes >= 1:
         reference = stokes_one_reference.q[-1]
     else:
-        init, run, to_state = advance
-        reference = to_state(run(init(state), 0, 4.0 / (16 * steps[-1]), 16 * steps[-1])).q
-    errors = final_errors(advance, state, 4.0, steps, reference)
+        reference = run(state, inertia, 4.0 / (16 * steps[-1]), 16 * steps[-1])
+    errors = np.array([float(quat.angle_between(run(state, inertia, 4.0 / n, n), reference)) for n in steps])
     assert fitted_order(4.0 / steps, errors) == pytest.approx(jaxrot.FLUID_SCHEMES[name].order, abs=0.1)
 
 

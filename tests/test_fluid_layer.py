@@ -42,13 +42,16 @@ def test_graded_start_is_a_run_of_its_substeps():
         fluid_layer.FIELD, jaxrot._fluid._fluid.check_fluid(fluid_layer.fluid(), (), jnp.float64)[0]
     )
     carry = scheme.init(state, 0.0, inertia, fluid_layer.torque, args)
+    # One compiled step for every substep (t and the size are runtime values): run eagerly, each
+    # substep dispatched its operations one by one, which compiled each of them.
+    step = jax.jit(lambda c, t, size: scheme.step(c, t, size, inertia, fluid_layer.torque, args))
     t, sizes = 0.0, []
     while True:
         size = 1 / (16 * 1e3) + 0.15 * t
         if size >= dt - t:
             size = dt - t
         sizes.append(size)
-        carry = scheme.step(carry, t, size, inertia, fluid_layer.torque, args)
+        carry = step(carry, jnp.asarray(t), jnp.asarray(size))
         t += size
         if t >= dt * (1 - 1e-12):
             break
