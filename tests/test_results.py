@@ -47,6 +47,8 @@ RESULTS = {
     # The fluid race: rows are jaxrot's fluid and overdamped schemes and diffrax's solvers.
     "fluid_race_cpu.json": (None, "python benchmarks/regenerate.py --only fluid_race"),
     "overdamped_cost_cpu.json": (None, "python benchmarks/regenerate.py --only overdamped_cost"),
+    # One exponential step against rkmk4's with the same physics (issue 66): rows are steps, not schemes.
+    "fluid_step_cost_cpu.json": (None, "python benchmarks/regenerate.py --only fluid_step_cost"),
     # Bodies at a temperature: the thermal schemes and the peers, not jaxrot.SCHEMES.
     "thermal_orders.json": (None, "python benchmarks/regenerate.py --only thermal_orders"),
     "thermal_peers.json": (None, "python benchmarks/regenerate.py --only thermal_peers"),
