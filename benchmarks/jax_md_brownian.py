@@ -29,7 +29,6 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import scipy.linalg  # noqa: E402
 
 from jaxrot import quaternion as quat  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
@@ -37,7 +36,7 @@ from jaxrot.comparison import machine_info  # noqa: E402
 
 try:
     from jax_md import rigid_body
-    from jax_md_systems import free_energy, free_system, shape
+    from jax_md_systems import favro, free_energy, free_system, shape
 
     import jaxrot.jax_md as jm
 except ImportError:  # regenerate.py's other jobs run on Python 3.11, where jax_md is not installed
@@ -51,19 +50,6 @@ ROOT = Path(__file__).resolve().parents[1]
 KT, FRICTION, GAMMA_CENTRE = 1.0, (1.0, 2.0, 4.0), 0.5
 TIMES, FREE_DT = (0.5, 1.0, 2.0), 0.05
 FIELDS, DIPOLE_DT = (0.5, 2.0, 8.0), 0.02
-
-
-def favro(diffusion, t):
-    """``(⟨P₁⟩, ⟨P₂⟩)`` per body axis after free diffusion over ``t`` (tests/test_jax_md_brownian.py)."""
-    generators = [-np.cross(np.eye(3), e) for e in np.eye(3)]
-    one = np.eye(3)
-    g1 = sum(d * e @ e for d, e in zip(diffusion, generators, strict=True))
-    g2 = sum(
-        d * np.linalg.matrix_power(np.kron(e, one) + np.kron(one, e), 2)
-        for d, e in zip(diffusion, generators, strict=True)
-    )
-    m1, m2 = scipy.linalg.expm(t * g1), scipy.linalg.expm(t * g2)
-    return np.diag(m1), np.array([(3 * m2[4 * k, 4 * k] - 1) / 2 for k in range(3)])
 
 
 def mean_error(x):

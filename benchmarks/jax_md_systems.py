@@ -12,6 +12,8 @@ API (jax_md ships the shape itself). Importing it imports jax_md (ImportError wi
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
 
 
 # jax_md computes at import, with JAX's default promotion rules (not jaxrot's strict test settings).
@@ -55,3 +57,18 @@ def tetrahedra(n=40, density=DENSITY, key=0):
     displacement, shift = space.periodic(box)
     energy_fn = rigid_body.point_energy(energy.soft_sphere_pair(displacement), shape())
     return energy_fn, shift, bodies(n, box, jax.random.key(key))
+
+
+def favro(diffusion, t):
+    """``(⟨P₁⟩, ⟨P₂⟩)``, ``(3,)`` each: the body axes' self-correlation after free rotational diffusion
+    with diffusion ``(3,)`` about the body axes over ``t`` (Favro's closed form, as matrix exponentials of
+    the generators ``E_k v = e_k × v``): the oracle of `jaxrot.jax_md.brownian`'s free bodies."""
+    generators = [-np.cross(np.eye(3), e) for e in np.eye(3)]
+    one = np.eye(3)
+    g1 = sum(d * e @ e for d, e in zip(diffusion, generators, strict=True))
+    g2 = sum(
+        d * np.linalg.matrix_power(np.kron(e, one) + np.kron(one, e), 2)
+        for d, e in zip(diffusion, generators, strict=True)
+    )
+    m1, m2 = scipy.linalg.expm(t * g1), scipy.linalg.expm(t * g2)
+    return np.diag(m1), np.array([(3 * m2[4 * k, 4 * k] - 1) / 2 for k in range(3)])

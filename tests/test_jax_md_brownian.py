@@ -18,7 +18,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.linalg
 
 
 with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
@@ -30,6 +29,7 @@ with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
 
 import jaxrot.jax_md as jm
 from jaxrot import quaternion as quat
+from jaxrot.jax_md._common import promoting
 
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -41,33 +41,11 @@ FRICTION = (1.0, 2.0, 4.0)  # rotational, per body axis: D = kT/ζ = (1, 1/2, 1/
 GAMMA_CENTRE = 0.5  # jax_md's friction over mass: the centres' D = kT / (m γ) = 1/2 (mass 4)
 
 
-def _promoting(fn):
-    @functools.wraps(fn)
-    def wrapped(*args, **kwargs):
-        with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
-            return fn(*args, **kwargs)
-
-    return wrapped
-
-
-def favro(diffusion, t):
-    """``(⟨P₁⟩, ⟨P₂⟩)`` ``(3,)`` each of the body axes' self-correlation after free diffusion over ``t``."""
-    generators = [np.cross(np.eye(3), e) * -1 for e in np.eye(3)]  # E_k v = e_k × v
-    one = np.eye(3)
-    g1 = sum(d * e @ e for d, e in zip(diffusion, generators, strict=True))
-    g2 = sum(
-        d * np.linalg.matrix_power(np.kron(e, one) + np.kron(one, e), 2)
-        for d, e in zip(diffusion, generators, strict=True)
-    )
-    m1, m2 = scipy.linalg.expm(t * g1), scipy.linalg.expm(t * g2)
-    return np.diag(m1), np.array([(3 * m2[4 * k, 4 * k] - 1) / 2 for k in range(3)])
-
-
 def test_favro_closed_form_is_the_textbook_p1():
     """The matrix form's P₁ is e^{−(D_j + D_k) t} per axis; a sphere's P₂ is e^{−6Dt}."""
-    p1, _ = favro((1.0, 0.5, 0.25), 0.7)
+    p1, _ = systems.favro((1.0, 0.5, 0.25), 0.7)
     np.testing.assert_allclose(p1, np.exp(-0.7 * np.array([0.75, 1.25, 1.5])), rtol=1e-12)
-    _, p2 = favro((0.3, 0.3, 0.3), 0.7)
+    _, p2 = systems.favro((0.3, 0.3, 0.3), 0.7)
     np.testing.assert_allclose(p2, np.exp(-6 * 0.3 * 0.7), rtol=1e-12)
 
 
@@ -85,7 +63,7 @@ def _free_run(n=4000, dt=0.05, steps=20):
         rotational_friction=jnp.asarray(FRICTION),
     )
     start = init_fn(jax.random.key(2), body, mass=systems.shape().mass())
-    end = jax.jit(_promoting(lambda s: jax.lax.fori_loop(0, steps, lambda i, s_: apply_fn(s_), s)))(start)
+    end = jax.jit(promoting(lambda s: jax.lax.fori_loop(0, steps, lambda i, s_: apply_fn(s_), s)))(start)
     init_md, apply_md = simulate.brownian(lambda r: 0.0 * jnp.sum(r), shift, dt, KT, GAMMA_CENTRE)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         centres = init_md(jax.random.key(2), body.center, mass=4.0)
@@ -104,7 +82,7 @@ def test_free_body_diffuses_per_axis_as_favro():
     r0, r1 = rotation(start.position.orientation.vec), rotation(end.position.orientation.vec)
     m = np.einsum("nai,naj->nij", r0, r1)
     cosines = np.stack([m[:, k, k] for k in range(3)], axis=1)  # u_l(t)·u_l(0) per body axis
-    p1, p2 = favro(KT / np.asarray(FRICTION), t)
+    p1, p2 = systems.favro(KT / np.asarray(FRICTION), t)
     for samples, expected in ((cosines, p1), (1.5 * cosines**2 - 0.5, p2)):
         mean, error = samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(len(samples))
         assert np.all(np.abs(mean - expected) < 4 * error), (mean, expected, error)
@@ -139,7 +117,7 @@ def test_dipole_in_a_field_follows_the_langevin_function():
     init_fn, apply_fn = jm.brownian(energy_fn, shift, 0.02, KT, 1.0)
 
     @jax.jit
-    @_promoting
+    @promoting
     def run(state):
         def snapshot(s, _):
             s = jax.lax.fori_loop(0, 50, lambda i, s_: apply_fn(s_), s)
@@ -238,7 +216,7 @@ def test_interacting_tetrahedra_stay_finite_and_isotropic():
     init_fn, apply_fn = jm.brownian(energy_fn, shift, 0.01, KT, 1.0)
 
     @jax.jit
-    @_promoting
+    @promoting
     def run(state):
         def snapshot(s, _):
             s = jax.lax.fori_loop(0, 50, lambda i, s_: apply_fn(s_), s)
