@@ -191,10 +191,10 @@ def bind_fluid(scheme, model, fluid, key, batch_shape, dtype, inertia, args, arg
 
 def bind_thermal(scheme, fluid, fluid_axes, args, args_axes, key, n: int):
     """``(scheme, args, args_axes)`` of a Langevin scheme in a rollout of ``n`` bodies: the scheme bound
-    to the key's implementation, its args a `ThermalArgs` (the body keys per body, or None)."""
-    key_data, impl = (None, None) if key is None else body_keys(check_key(key), n)
-    axes = ThermalArgs(args_axes, fluid_axes, None if key_data is None else 0)
-    return scheme.bind(impl), ThermalArgs(args, fluid, key_data), axes
+    to the key's implementation, its args a `ThermalArgs` (the body keys per body). ``key`` is never
+    None: `call_model` gives ``"thermal"`` only with one."""
+    key_data, impl = body_keys(check_key(key), n)
+    return scheme.bind(impl), ThermalArgs(args, fluid, key_data), ThermalArgs(args_axes, fluid_axes, 0)
 
 
 def for_concrete_steps(scheme, fluid, dt):
@@ -211,12 +211,13 @@ def for_concrete_steps(scheme, fluid, dt):
 def bind_brownian(scheme, q, fluid, key):
     """``(scheme, start)`` of an overdamped rollout at a temperature: ``q`` ``(N, 4)`` with each body's
     key data and diffusion ``kT/ζ`` ``(N, 3)`` (`BrownianStart`); ``fluid`` the flattened values; the
-    scheme bound to the key's implementation."""
+    scheme bound to the key's implementation. ``key`` is never None: `call_model` gives ``"brownian"``
+    only with one."""
     n = q.shape[0]
     kT = jnp.asarray(fluid.kT)
     kT = kT[:, None] if kT.ndim else kT  # (N, 1) per body, or shared
     friction = jnp.asarray(fluid.friction)
     friction = friction if friction.ndim == 2 or kT.ndim == 0 else friction[None]
     diffusion = jnp.broadcast_to(kT / friction, (n, 3))
-    key_data, impl = (None, None) if key is None else body_keys(check_key(key), n)
+    key_data, impl = body_keys(check_key(key), n)
     return scheme.bind(impl), BrownianStart(q, key_data, diffusion)

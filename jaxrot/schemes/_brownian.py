@@ -41,7 +41,7 @@ class BrownianStart(NamedTuple):
 class BrownianCarry(NamedTuple):
     """What a Brownian scheme carries (one body): ``q`` ``(4,)``; ``omega`` ``(3,)``, the deterministic
     world angular velocity at ``q`` (the next step's first stage, and what the rollout saves); the
-    global ``step`` index (``int32``); the body's ``key_data`` (None without noise); its ``diffusion``
+    global ``step`` index (``int32``); the body's ``key_data``; its ``diffusion``
     ``(3,)`` about the body axes."""
 
     q: jax.Array
@@ -56,7 +56,8 @@ class AbstractBrownianScheme(eqx.Module):
 
     Class attributes: ``name``, ``order`` (weak order, measured by the tests), ``normals_per_step``,
     ``velocity_evals_per_step``. ``key_impl`` (static) is set by the rollout. `advance` takes the
-    step's standard normals (None: no noise); `step` draws them from the carried key and counter.
+    step's standard normals (None: no noise, as `Noiseless` runs it at ``kT = 0``); `step` draws them
+    from the carried key and counter (the ``"brownian"`` model always has a key).
     """
 
     key_impl: str | None = eqx.field(default=None, static=True)
@@ -74,9 +75,7 @@ class AbstractBrownianScheme(eqx.Module):
         return BrownianCarry(q, velocity(t0, q), jnp.int32(0), start.key_data, start.diffusion)
 
     def step(self, carry: BrownianCarry, t, dt, velocity) -> BrownianCarry:
-        normals = None
-        if carry.key_data is not None:
-            normals = step_normals(carry.key_data, self.key_impl, carry.step, self.normals_per_step, dt.dtype)
+        normals = step_normals(carry.key_data, self.key_impl, carry.step, self.normals_per_step, dt.dtype)
         q, omega = self.advance(carry.q, carry.omega, carry.diffusion, t, dt, velocity, normals)
         return carry._replace(q=q, omega=omega, step=carry.step + 1)
 

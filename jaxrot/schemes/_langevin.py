@@ -29,8 +29,9 @@ from ._noise import step_normals
 
 
 class ThermalArgs(NamedTuple):
-    """A Langevin scheme's ``args`` in a rollout: the torque's own, one body's `jaxrot.Fluid` values
-    and its key data (``uint32``; None when the run has no noise: ``kT = 0`` and no key)."""
+    """A Langevin scheme's ``args`` in a rollout at a temperature (the ``"thermal"`` model): the
+    torque's own, one body's `jaxrot.Fluid` values and its key data (``uint32``). At ``kT = 0`` the
+    args are a `FluidArgs`, which has no key (`_unpack`)."""
 
     args: Any
     fluid: Any

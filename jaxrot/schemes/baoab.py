@@ -117,14 +117,9 @@ class BAOAB(AbstractLangevinScheme):
         return stage(BAOABWeights(f, s, c - s, dt - 2 * c, bridge, relaxation))
 
     def advance(self, carry, t, dt, inertia, torque, args, fluid, normals):
-        moments = inertia.tensor
-        w = self.weights(fluid.friction, moments, fluid.kT, dt, noise=normals is not None)
-        return self.advance_with(w, carry, t, dt, inertia, torque, args, fluid, normals)
-
-    def advance_with(self, w, carry, t, dt, inertia, torque, args, fluid, normals):
-        """`advance` with the step's `weights` given (computed by the caller, e.g. once for all bodies)."""
         (q, omega), tau, step = carry
         moments = inertia.tensor
+        w = self.weights(fluid.friction, moments, fluid.kT, dt, noise=normals is not None)
         half = 0.5 * dt
         if torque is not None:
             omega = omega + kick(q, (2 - w.f) / moments, half * tau)
