@@ -69,7 +69,7 @@ from .._fluid._flow import body_flow
 from .._inertia import body_inertia
 from .._state import RotState
 from ._base import AbstractScheme, world_torque
-from ._lie_runge_kutta import CHARTS
+from ._lie_runge_kutta import CHARTS, add_terms
 from ._phi import phi_functions
 from ._rkn_splitting import uses_omega
 
@@ -153,13 +153,7 @@ def _weights(tableau: ExponentialTableau, z):
 
 def _sum(weights, values):
     """``Σ_j weights[j] · values[j]`` over the nonzero weights, or None."""
-    terms = [w * values[j] for j, w in weights.items() if not (isinstance(w, float) and w == 0.0)]
-    if not terms:
-        return None
-    total = terms[0]
-    for term in terms[1:]:
-        total = total + term
-    return total
+    return add_terms([w * values[j] for j, w in weights.items() if not (isinstance(w, float) and w == 0.0)])
 
 
 class FluidCarry(NamedTuple):

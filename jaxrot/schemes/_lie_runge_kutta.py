@@ -35,6 +35,8 @@ Reference:
     2nd ed., Springer (2006), section IV.8.
 """
 
+import functools
+import operator
 from typing import Any, ClassVar, NamedTuple
 
 import diffrax
@@ -57,13 +59,12 @@ def _combination(dt, weights, vectors):
     # race's one program per scheme) ``dt * Σ`` compiled to 2.5x more broadcasts and transposes and ran
     # rkmk_dopri8 2.6x slower than with dt a constant (100 bodies, heavy top: 10 vs 3.8 ms); this form
     # runs both at 3.8-4.0 ms.
-    terms = [(float(w) * dt) * v for w, v in zip(weights, vectors, strict=False) if w != 0]
-    if not terms:
-        return None
-    total = terms[0]
-    for term in terms[1:]:
-        total = total + term
-    return total
+    return add_terms([(float(w) * dt) * v for w, v in zip(weights, vectors, strict=False) if w != 0])
+
+
+def add_terms(terms):
+    """``terms[0] + terms[1] + …`` in that order, or None for no terms."""
+    return functools.reduce(operator.add, terms) if terms else None
 
 
 def _no_barrier(*values):
