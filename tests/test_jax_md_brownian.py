@@ -167,6 +167,16 @@ def test_bad_input_is_refused_before_compiling(call, message):
         call(systems.free_energy, shift)
 
 
+def test_positions_must_be_3d_rigid_bodies():
+    """`brownian`'s step refuses positions that are not ``RigidBody``s of quaternions, as
+    `nvt_langevin`'s and `nve`'s do (the one check of `jaxrot.jax_md._common`), naming its call."""
+    _, shift = space.free()
+    _, apply_fn = jm.brownian(systems.free_energy, shift, 1e-3, KT)
+    state = simulate.BrownianState(jnp.zeros((2, 3)), jnp.ones((2,)), jax.random.key(0))
+    with pytest.raises(ValueError, match=r"jaxrot\.jax_md\.brownian steps 3-d rigid bodies.*RigidBody"):
+        apply_fn(state)
+
+
 @pytest.mark.parametrize("simulator", ["brownian", "nvt_langevin"])
 def test_per_body_friction_of_another_length_is_refused_while_tracing(simulator):
     """A ``(M, 3)`` friction for N ≠ M bodies passes the construction check (N is not known then) and is

@@ -27,6 +27,7 @@ from .._core._concrete import is_concrete
 from ..schemes._brownian import for_steps
 from ._common import (
     check_common,
+    check_positions,
     check_positive,
     check_rotational_friction,
     jax_md_promotion,
@@ -42,17 +43,6 @@ from ._convert import body_torque
 
 with jax_md_promotion():
     from jax_md import quantity, rigid_body, simulate
-
-
-def _check_positions(position):
-    if not isinstance(position, rigid_body.RigidBody) or not isinstance(
-        position.orientation, rigid_body.Quaternion
-    ):
-        raise ValueError(
-            "jaxrot.jax_md.brownian steps 3-d rigid bodies: the positions must be a "
-            "jax_md.rigid_body.RigidBody whose orientation is a rigid_body.Quaternion; "
-            f"got {type(position).__name__}."
-        )
 
 
 def _turn_orientations(scheme, q, torque_body, zeta, kT, dt, key):
@@ -170,7 +160,7 @@ def brownian(
         _kT = kwargs.pop("kT", kT)
         gamma_center, gamma_orientation = split_gamma(kwargs.pop("gamma", gamma))
         position, mass = state.position, state.mass
-        _check_positions(position)
+        check_positions(position, "jaxrot.jax_md.brownian")
         key, split = jax.random.split(state.rng)  # jax_md's: the centres draw its numbers
         force = force_fn(position, **kwargs)
         center = position.center

@@ -95,15 +95,20 @@ def check_common(energy_or_force_fn, shift_fn, dt):
     check_positive(dt, "dt")
 
 
-def orientation_parts(state):
-    """``(rest, center, orientation)`` of a jax_md rigid-body state; ValueError unless 3-d quaternions."""
-    if not isinstance(state.position, rigid_body.RigidBody) or not isinstance(
-        state.position.orientation, rigid_body.Quaternion
+def check_positions(position, call="jaxrot.jax_md"):
+    """ValueError unless ``position`` is a ``RigidBody`` of 3-d quaternions (``call`` names the caller)."""
+    if not isinstance(position, rigid_body.RigidBody) or not isinstance(
+        position.orientation, rigid_body.Quaternion
     ):
         raise ValueError(
-            "jaxrot.jax_md steps 3-d rigid bodies: the positions must be a jax_md.rigid_body.RigidBody whose "
-            f"orientation is a rigid_body.Quaternion; got {type(state.position).__name__}."
+            f"{call} steps 3-d rigid bodies: the positions must be a jax_md.rigid_body.RigidBody whose "
+            f"orientation is a rigid_body.Quaternion; got {type(position).__name__}."
         )
+
+
+def orientation_parts(state):
+    """``(rest, center, orientation)`` of a jax_md rigid-body state; ValueError unless 3-d quaternions."""
+    check_positions(state.position)
     return rigid_body.split_center_and_orientation(state)
 
 
