@@ -34,6 +34,8 @@ from ._inertia import (
     BodyInertia as BodyInertia,
     MathematicalBody as MathematicalBody,
     body_inertia as body_inertia,
+    central_inertia as central_inertia,
+    pivot_inertia as pivot_inertia,
 )
 from ._integrate._chunked import (
     Checkpoint as Checkpoint,
@@ -86,12 +88,14 @@ __all__ = [
     "THERMAL_SCHEMES",
     "Trajectory",
     "body_inertia",
+    "central_inertia",
     "compiler_options",
     "fit_inertia",
     "identify",
     "load_checkpoint",
     "overdamped_rollout",
     "per_body",
+    "pivot_inertia",
     "reference_rollout",
     "rollout",
     "rollout_chunks",
