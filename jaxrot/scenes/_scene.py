@@ -7,8 +7,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._inertia import central_inertia, check_inertia_values
+from .._inertia import check_inertia_values
 from .._particles import is_per_body
+from .._pivot import central_inertia
 from .._state import RotState
 from ..diagnostics import kinetic_energy
 from ..torques import Gravity
