@@ -107,3 +107,26 @@ def test_the_old_heavy_top_scene_is_refused():
     scene = SCENES["heavy_top"]()._replace(inertia=jnp.array([1.0, 2.0, 3.0]))
     with pytest.raises(ValueError, match=r"`heavy_top\.inertia`.*not a body that can exist"):
         scene.central_inertia()
+
+
+def test_mujoco_accepts_the_built_in_tops_and_refuses_the_old_heavy_top():
+    """MuJoCo checks a body's central inertia (A + B >= C) when it compiles a model: the peer agrees."""
+    mujoco = pytest.importorskip("mujoco")
+
+    def compile_top(central, offset, mass):
+        full = " ".join(f"{central[i, j]:.15g}" for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
+        xml = (
+            '<mujoco><worldbody><body><joint type="ball"/>'
+            f'<inertial pos="{offset[0]} {offset[1]} {offset[2]}" mass="{mass}" fullinertia="{full}"/>'
+            "</body></worldbody></mujoco>"
+        )
+        return mujoco.MjModel.from_xml_string(xml)
+
+    for name in ("heavy_top", "lagrange_top"):
+        scene = SCENES[name]()
+        offset = np.asarray(scene.args["gravity"]["offset_body"])
+        compile_top(np.asarray(scene.central_inertia()), offset, scene.mass)
+    # The old heavy_top, unchecked: (1, 2, 3) about the pivot less the parallel-axis term of 1 kg.
+    old = np.diag([1.0, 2.0, 3.0]) - (OFFSET @ OFFSET * np.eye(3) - np.outer(OFFSET, OFFSET))
+    with pytest.raises(ValueError, match=r"A \+ B >= C"):
+        compile_top(old, OFFSET, 1.0)
