@@ -57,13 +57,14 @@ def heavy_top(dtype=jnp.float64) -> Scene:
     (``I₁ + I₂ = I₃``) whose centre of mass lies 0.3 m off its plane, which no body is (central moments
     ``(0.907, 1.900, 2.988)``, ``I₁ + I₂ < I₃``). Raising the smallest moment to 1.25 is the smallest
     round change that makes it physical (from about 1.18 on) while keeping the offset, mass, spin,
-    step and horizon: central moments ``(1.157, 1.900, 2.988)`` (``I₁ + I₂ − I₃ = 0.069``, a body about
-    0.19 m thick along its largest-moment axis). The scene stays in the pivot tensor's principal axes,
-    so its inertia is the diagonal fast path, and the motion about a fixed pivot depends on the pivot
-    tensor alone; the central tensor, `Scene.central_inertia`, then has the small products
-    ``m r_i r_j`` (≤ 0.03 kg m²): its principal axes are turned by about 1° from the body axes, as for
-    any body whose centre of mass lies off the pivot tensor's axes. Moving the centre of mass onto an
-    axis instead would have made both tensors diagonal but changed the torque the scene is about.
+    step and horizon: central moments ``(1.157, 1.900, 2.988)`` (``I₁ + I₂ − I₃ = 0.069 = 2m⟨z²⟩``,
+    an rms extent of 0.19 m along the largest-moment axis). The scene stays in the pivot tensor's
+    principal axes, so its inertia is the diagonal fast path, and the motion about a fixed pivot
+    depends on the pivot tensor alone; the central tensor, `Scene.central_inertia`, then has the
+    small products ``m r_i r_j`` (≤ 0.03 kg m²): its principal axes are turned by 0.9–1.2° from the
+    body axes, as for any body whose centre of mass lies off the pivot tensor's axes. Moving the
+    centre of mass onto an axis instead would have made both tensors diagonal but changed the torque
+    the scene is about.
     """
     q0 = quat.exp(_f([0.1, 0.2, 0.3], dtype))
     return _checked(
