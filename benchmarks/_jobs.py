@@ -193,7 +193,8 @@ JOBS = {
         ("memory_cpu.json",),
         ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"),
         5,
-        sources=(*BASE, *VACUUM, "benchmarks/memory.py", "benchmarks/throughput.py"),
+        # the heavy_top scene's bodies (throughput.bodies)
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/memory.py", "benchmarks/throughput.py"),
     ),
     # Accuracy only: the largest safe step, blow-up and long-run drift of every scheme.
     "stability": Job(
@@ -350,7 +351,7 @@ JOBS = {
         quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
         quick_minutes=3,
         tables=("fluid_orders_table",),
-        sources=(*BASE, *VACUUM, *FLUID, "benchmarks/fluid_orders.py"),
+        sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/fluid_orders.py"),  # row "none": heavy_top
         timed=False,
     ),
     "fluid_layer": Job(

@@ -46,6 +46,7 @@ from ._integrate._overdamped import overdamped_rollout as overdamped_rollout
 from ._integrate._rollout import rollout as rollout
 from ._integrate._runtime_check import IntegrationError as IntegrationError
 from ._particles import per_body as per_body
+from ._pivot import central_inertia as central_inertia, pivot_inertia as pivot_inertia
 from ._state import RotState as RotState, Trajectory as Trajectory
 from .scenes import SCENES as SCENES, Scene as Scene
 from .schemes import (
@@ -86,12 +87,14 @@ __all__ = [
     "THERMAL_SCHEMES",
     "Trajectory",
     "body_inertia",
+    "central_inertia",
     "compiler_options",
     "fit_inertia",
     "identify",
     "load_checkpoint",
     "overdamped_rollout",
     "per_body",
+    "pivot_inertia",
     "reference_rollout",
     "rollout",
     "rollout_chunks",

@@ -114,6 +114,12 @@ class Gravity(TorqueModel):
 
     ``args[key]``: ``offset_body`` ``(3,)`` m (pivot → centre of mass, body frame),
     ``weight`` ``(3,)`` N (world frame, ``m g``).
+
+    The rollout's ``inertia`` is then the inertia about the pivot, which exceeds the central one
+    by the parallel-axis term ``m(|r|²𝟙 − r rᵀ)``: build it with `jaxrot.pivot_inertia(central,
+    mass, offset_body)`, or check one with `jaxrot.central_inertia(pivot, mass, offset_body)`
+    (a ``ValueError`` if no body has it). The torque itself cannot check: it knows the weight,
+    not the mass (``g`` is yours).
     """
 
     key: str = eqx.field(static=True, default="gravity")

@@ -141,8 +141,9 @@ def test_float32_round_off_accumulates_slowly(name):
     """1000 float32 steps of the heavy top stay within 1e-4 rad of the same run in float64, per
     free-rotor flow of a step for the splittings (each flow adds its own roundings).
 
-    Measured: zhao 3.1e-5, rozmanov 2.7e-6, euler 2.3e-5, no_squish 1.4e-5 rad, srkn6b 2.2e-4
-    (5 flows), srkn14a 7.0e-4 (15 flows). Zhao and NO_SQUISH update by increments so |ω| and |p|
+    Measured (2026-11-29, the scene's I = (1.25, 2, 3) about the pivot): zhao 1.5e-5, rozmanov
+    2.2e-6, euler 4.0e-6, no_squish 8.4e-6, splitting 6.4e-5 rad, srkn6b 1.2e-4 (5 flows), srkn14a
+    1.0e-4 (15 flows). Zhao and NO_SQUISH update by increments so |ω| and |p|
     are not re-rounded each step; written the textbook way they drifted 3.4e-4 and 3.1e-4 rad,
     above their float64 truncation error."""
     s32, s64 = heavy_top(dtype=jnp.float32), heavy_top()

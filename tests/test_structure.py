@@ -184,7 +184,7 @@ FLOORS = [
     ["_core"],  # NaN-safe helpers, compile settings, the generic value checks
     ["quaternion"],  # the rotation
     ["_state", "_inertia"],  # a body: its state, its inertia (and the inertia's checks)
-    ["_particles", "_validation"],  # many bodies; the checks of a run
+    ["_particles", "_validation", "_pivot"],  # many bodies; the checks of a run; a top's pivot inertia
     ["torques", "_free_body", "_fluid", "diagnostics"],  # what turns a body, the medium, measures
     ["schemes", "analytic", "scenes"],  # one step; exact motions; problems
     ["_integrate"],  # every loop, and the binder that decides which scheme fits which call

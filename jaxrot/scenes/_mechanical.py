@@ -35,49 +35,75 @@ def free_top(dtype=jnp.float64) -> Scene:
 
 
 def _gravity_args(offset, dtype):
+    """1 kg (weight 9.81 N down the world z) at ``offset`` (m, body frame) from the pivot."""
     return {"gravity": {"offset_body": _f(offset, dtype), "weight": _f([0.0, 0.0, -9.81], dtype)}}
+
+
+def _checked(scene):
+    scene.central_inertia()  # ValueError unless the pivot inertia, mass and offset are a body that can exist
+    return scene
 
 
 def heavy_top(dtype=jnp.float64) -> Scene:
     """Asymmetric heavy top: gravity on a centre of mass offset from a fixed pivot.
 
-    Inertia ``(1, 2, 3)`` kg m² about the pivot (principal axes = body axes),
-    centre of mass at ``(0.1, 0.05, 0.3)`` m in the body, weight ``(0, 0, −9.81)``
-    N (1 kg), spun mostly about the body z axis and tilted by about 0.37 rad.
-    The orientation-dependent torque makes the motion nutate and precess
-    chaotically. Energy is conserved.
+    Inertia ``(1.25, 2, 3)`` kg m² about the pivot (its principal axes = body axes), mass 1 kg,
+    centre of mass at ``(0.1, 0.05, 0.3)`` m in the body, weight ``(0, 0, −9.81)`` N, spun mostly
+    about the body z axis (``ω_b = (0.3, 1, 6)`` rad/s) and tilted by about 0.37 rad. The
+    orientation-dependent torque makes the motion nutate and precess chaotically. Energy is conserved.
+
+    Why these numbers: the moments about a pivot exceed the central ones by the parallel-axis term
+    ``m(|r|²𝟙 − r rᵀ)``. Until 2026-11 the scene had ``(1, 2, 3)`` about the pivot: a planar body
+    (``I₁ + I₂ = I₃``) whose centre of mass lies 0.3 m off its plane, which no body is (central moments
+    ``(0.907, 1.900, 2.988)``, ``I₁ + I₂ < I₃``). Raising the smallest moment to 1.25 is the smallest
+    round change that makes it physical (from about 1.18 on) while keeping the offset, mass, spin,
+    step and horizon: central moments ``(1.157, 1.900, 2.988)`` (``I₁ + I₂ − I₃ = 0.069 = 2m⟨z²⟩``,
+    an rms extent of 0.19 m along the largest-moment axis). The scene stays in the pivot tensor's
+    principal axes, so its inertia is the diagonal fast path, and the motion about a fixed pivot
+    depends on the pivot tensor alone; the central tensor, `Scene.central_inertia`, then has the
+    small products ``m r_i r_j`` (≤ 0.03 kg m²): its principal axes are turned by 0.9–1.2° from the
+    body axes, as for any body whose centre of mass lies off the pivot tensor's axes. Moving the
+    centre of mass onto an axis instead would have made both tensors diagonal but changed the torque
+    the scene is about.
     """
     q0 = quat.exp(_f([0.1, 0.2, 0.3], dtype))
-    return Scene(
-        "heavy_top",
-        "asymmetric heavy top, I=(1,2,3), gravity on an offset centre of mass",
-        RotState(q0, quat.rotate(q0, _f([0.3, 1.0, 6.0], dtype))),
-        _f([1.0, 2.0, 3.0], dtype),
-        Gravity(),
-        _gravity_args([0.1, 0.05, 0.3], dtype),
-        dt=0.005,
-        t_end=5.0,
+    return _checked(
+        Scene(
+            "heavy_top",
+            "asymmetric heavy top, I=(1.25,2,3) about the pivot, gravity on an offset centre of mass",
+            RotState(q0, quat.rotate(q0, _f([0.3, 1.0, 6.0], dtype))),
+            _f([1.25, 2.0, 3.0], dtype),
+            Gravity(),
+            _gravity_args([0.1, 0.05, 0.3], dtype),
+            dt=0.005,
+            t_end=5.0,
+            mass=1.0,
+        )
     )
 
 
 def lagrange_top(dtype=jnp.float64) -> Scene:
     """Symmetric heavy (Lagrange) top: a fast spinning top precessing and nutating under gravity.
 
-    Inertia ``(2, 2, 1)`` kg m² about the pivot, centre of mass 0.25 m up the
-    symmetry axis, weight 9.81 N, tilted 0.3 rad, spin 25 rad/s about the axis.
+    Inertia ``(2, 2, 1)`` kg m² about the pivot, mass 1 kg, centre of mass 0.25 m up the
+    symmetry axis (central moments ``(1.9375, 1.9375, 1)``: a body that can exist), weight 9.81 N,
+    tilted 0.3 rad, spin 25 rad/s about the axis.
     Energy and the angular momentum components about the vertical and about the
     symmetry axis are conserved.
     """
     q0 = quat.from_axis_angle(_f([1.0, 0.0, 0.0], dtype), _f(0.3, dtype))
-    return Scene(
-        "lagrange_top",
-        "symmetric heavy top, I=(2,2,1), spin 25 rad/s, tilted 0.3 rad",
-        RotState(q0, quat.rotate(q0, _f([0.0, 0.0, 25.0], dtype))),
-        _f([2.0, 2.0, 1.0], dtype),
-        Gravity(),
-        _gravity_args([0.0, 0.0, 0.25], dtype),
-        dt=0.002,
-        t_end=3.0,
+    return _checked(
+        Scene(
+            "lagrange_top",
+            "symmetric heavy top, I=(2,2,1), spin 25 rad/s, tilted 0.3 rad",
+            RotState(q0, quat.rotate(q0, _f([0.0, 0.0, 25.0], dtype))),
+            _f([2.0, 2.0, 1.0], dtype),
+            Gravity(),
+            _gravity_args([0.0, 0.0, 0.25], dtype),
+            dt=0.002,
+            t_end=3.0,
+            mass=1.0,
+        )
     )
 
 
