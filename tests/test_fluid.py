@@ -380,9 +380,11 @@ def test_no_nan_and_the_right_terminal_spin_at_a_stiffness_of_1e8(name, dtype):
     np.testing.assert_allclose(traj.omega[3:, 1], spin, atol=4 * eps)
 
 
-def test_fluid_rollouts_per_body_and_in_chunks():
+def test_fluid_rollouts_per_body_and_in_chunks(default_emitters):
     """Per-body frictions (the particle axes in front, and `jaxrot.per_body`) give each body its own
-    run, and chunks are the one call bit for bit."""
+    run, and chunks are the one call bit for bit: a promise about the programs users compile, so with
+    XLA's default emitters (the suite's faster-compiling loop emitters fused the per-body and shared
+    programs differently: 1 ulp apart on a 2-core EPYC)."""
     aspects = jnp.array([2.0, 4.0, 0.5])
     fluid = jaxrot.Fluid.spheroid(aspects, 1.0, 1.0, velocity_gradient=SHEAR)
     marked = jaxrot.Fluid.spheroid(jaxrot.per_body(aspects), 1.0, 1.0, velocity_gradient=SHEAR)
