@@ -136,6 +136,7 @@ def test_intervals_hold_the_truth_95_percent_of_the_time():
     pooled = inside.mean()
     per_parameter = inside.mean(axis=0)
     worst = result["names"][int(np.argmin(per_parameter))]
+    print(f"pooled coverage {pooled:.4f} (sd {sd:.4f}); worst parameter {worst}: {per_parameter.min():.3f}")
     assert 0.93 <= pooled <= 0.97, f"pooled coverage {pooled:.3f} (sd {sd:.4f})"
     assert per_parameter.min() >= 0.85, f"{worst}: {per_parameter.min():.3f}"
 

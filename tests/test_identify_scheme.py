@@ -8,8 +8,12 @@ error on the start's model is 0.54, above the bound, and `rkmk4`'s (fourth order
 (measured once; at 0.01 s they are 0.034 and 3e-7).
 """
 
+import collections
 import dataclasses
+import logging
+import re
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -87,3 +91,45 @@ def test_the_chosen_scheme_fits_within_a_tenth_of_a_standard_error(experiment):
     assert np.max(gap / np.asarray(default.stderr.inertia)) < 0.1
     gap = np.abs(np.asarray(chosen.omega0) - np.asarray(default.omega0))
     assert np.max(gap / np.asarray(default.stderr.omega0)) < 0.1
+
+
+class _Compiles(logging.Handler):
+    """The programs JAX compiles while attached: ``(name, argument shapes)`` of each "Compiling" log line."""
+
+    def __init__(self):
+        super().__init__(logging.DEBUG)
+        self.programs = []
+
+    def emit(self, record):
+        match = re.match(
+            r"Compiling (\S+) with global shapes and types (.*)\. Argument mapping", record.getMessage()
+        )
+        if match:
+            self.programs.append(match.groups())
+
+
+def test_one_residual_and_one_jacobian_program_per_call(experiment):
+    """The scheme is chosen in ONE residual program (the scheme a runtime index, `_scheme.SchemeSwitch`)
+    and the fit runs in ONE Jacobian program: here zhao fails the bound and rkmk4 passes it, so the
+    choice runs three schemes (before: three residual programs), and no program compiles twice for the
+    same shapes. A record shorter than the fixture's: shapes no other test compiles first."""
+    short = jaxrot.Experiment(
+        experiment.t[:26], q=experiment.q[:26], sigma_q=SIGMA_Q,
+        control=(experiment.control[0][:101], experiment.control[1][:101]),
+    )  # fmt: skip
+    handler = _Compiles()
+    logger = logging.getLogger("jax")
+    previous = jax.config.jax_log_compiles
+    logger.addHandler(handler)
+    jax.config.update("jax_log_compiles", True)
+    try:
+        fit = jaxrot.identify(short)
+    finally:
+        jax.config.update("jax_log_compiles", previous)
+        logger.removeHandler(handler)
+    assert fit.scheme.name == "rkmk4" and fit.converged
+    names = [name for name, _ in handler.programs]
+    assert sum("_residuals" in name for name in names) == 1, names
+    assert sum("_staged_gauss_newton" in name for name in names) == 1, names
+    twice = [program for program, count in collections.Counter(handler.programs).items() if count > 1]
+    assert not twice, twice

@@ -40,6 +40,8 @@ Gauss–Newton iteration holds ``J`` (``n_residuals × n_free``) rather than the
 per-step tape that ``jax.linearize`` of the rollout would keep.
 """
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -115,6 +117,78 @@ def _converged(f, predicted, ftol, floor):
     return (f <= floor) | (predicted <= ftol * f) | (predicted <= 2 * jnp.sqrt(f * floor))
 
 
+class Search(NamedTuple):
+    """Gauss–Newton's line-search state: the accepted iterate and what is known there, and the trial."""
+
+    z: jax.Array  # the accepted iterate
+    r: jax.Array  # its residuals
+    jac: jax.Array  # their Jacobian
+    aux: object  # the evaluation's auxiliary values there (a pytree)
+    f: jax.Array  # the objective there (inf before the first evaluation)
+    d: jax.Array  # the Gauss–Newton step from z (zero: the next trial is z itself)
+    slope: jax.Array  # the objective's slope along d
+    alpha: jax.Array  # the trial's fraction of d
+    rejections: jax.Array  # consecutive rejected trials
+
+
+def trace_once(evaluate, *example):
+    """``(evaluate as one traced jaxpr, its output shapes)``: a loop that calls it from several places
+    of its body (or once, from inside) traces and compiles the rollout once."""
+    traced, shapes = jax.make_jaxpr(evaluate, return_shape=True)(*example)
+    out_tree = jax.tree_util.tree_structure(shapes)
+
+    def call(*args):
+        return jax.tree_util.tree_unflatten(out_tree, jaxpr_as_fun(traced)(*args))
+
+    return call, shapes
+
+
+def start_search(z0, shapes):
+    """The `Search` before the first evaluation (``shapes``: `trace_once`'s ``(r, J, aux)``): its first
+    trial is ``z0`` itself, to be accepted with ``force``."""
+    r_shape, jac_shape, aux_shape = shapes
+    zeros = lambda x: jnp.zeros(x.shape, x.dtype)  # noqa: E731
+    return Search(
+        z=z0, r=zeros(r_shape), jac=zeros(jac_shape), aux=jax.tree.map(zeros, aux_shape),
+        f=jnp.asarray(jnp.inf, z0.dtype), d=jnp.zeros_like(z0), slope=jnp.zeros((), z0.dtype),
+        alpha=jnp.ones((), z0.dtype), rejections=jnp.zeros((), jnp.int32),
+    )  # fmt: skip
+
+
+def search_step(s, evaluate, force, minimum_norm):
+    """One trial of Gauss–Newton with backtracking Armijo: ``(Search, accepted, predicted decrease)``.
+
+    The trial ``z + α d`` is evaluated (``evaluate(z) -> (r, J, aux)``) and accepted when ``force`` (a
+    pass's start) or when its objective is strictly lower and within Armijo's test; then the next
+    proposal is the full Gauss–Newton step from the accepted point (``α = 1``), or the same step
+    halved after a rejection. ``predicted``: the model's decrease for the full step from the
+    accepted point (`_converged`).
+    """
+    z_try = s.z + s.alpha * s.d
+    r_try, jac_try, aux_try = evaluate(z_try)
+    f_try = jnp.sum(r_try * r_try)
+    # Strictly lower, too: once alpha * slope is below f's last digit, Armijo's test alone would
+    # accept an unchanged point; False for a NaN objective as well.
+    accept = force | ((f_try < s.f) & (f_try <= s.f + ARMIJO_SLOPE * s.alpha * s.slope))
+    z, r, jac, aux, f = jax.tree.map(
+        lambda a, b: jnp.where(accept, a, b),
+        (z_try, r_try, jac_try, aux_try, f_try),
+        (s.z, s.r, s.jac, s.aux, s.f),
+    )
+    d = _least_squares_step(jac, r, minimum_norm)
+    moved = jac @ d
+    predicted = -jnp.sum((2 * r + moved) * moved)  # the model's decrease for the full step
+    one = jnp.ones((), s.alpha.dtype)
+    out = Search(
+        z=z, r=r, jac=jac, aux=aux, f=f,
+        d=jnp.where(accept, d, s.d),
+        slope=jnp.where(accept, 2 * jnp.sum(r * moved), s.slope),
+        alpha=jnp.where(accept, one, ARMIJO_FACTOR * s.alpha),
+        rejections=jnp.where(accept, 0, s.rejections + 1).astype(jnp.int32),
+    )  # fmt: skip
+    return out, accept, predicted
+
+
 @eqx.filter_jit
 def gauss_newton(
     residual_fn, z0, data, ftol, floor, max_iter: int, minimum_norm: bool = False, jacobian_fn=None
@@ -144,6 +218,9 @@ def gauss_newton(
     linearisation (``jax.jacrev``: an ``m × m`` identity of cotangents, ``m`` the
     residuals, 3 267 for the three-manoeuvre satellite, and an ``m² n`` product per
     trial). Measured on that satellite, same iterates: 0.32 s → 0.19 s.
+
+    The iteration itself (trial point, Armijo's test, the next proposal) is `search_step`, which
+    `jaxrot.identify`'s staged loop (`_identify._solve`) runs too: one Gauss–Newton in the package.
     """
 
     def evaluate(z):
@@ -157,70 +234,25 @@ def gauss_newton(
         jac, r = jax.jacfwd(twice, has_aux=True)(z)
         return r, jac, None
 
-    def proposal(r, jac):
-        d = _least_squares_step(jac, r, minimum_norm)
-        moved = jac @ d
-        return d, moved, -jnp.sum((2 * r + moved) * moved)  # the model's decrease for the full step
-
     # The first pass of the loop evaluates z0 (accepted unconditionally, no iteration counted), so
     # the Jacobian program is compiled once, inside the loop, and traced once, here, instead of
     # also before the loop: on the three-manoeuvre satellite of `jaxrot.identify`, tracing 1.7 →
     # 1.0 s and compiling 5.2 → 3.8 s; with the states riding along as ``aux`` (no program of their
     # own, 1.6 s) its first call went from 12.0 to 6.4 s (one run each, `jax_log_compiles`, at
     # 06a7bff; `benchmarks/identify_speed.py` has the current figure).
-    traced, shapes = jax.make_jaxpr(evaluate, return_shape=True)(z0)
-    out_tree = jax.tree_util.tree_structure(shapes)
-    r_shape, jac_shape, aux_shape = shapes
-
-    def evaluate_traced(z):
-        return jax.tree_util.tree_unflatten(out_tree, jaxpr_as_fun(traced)(z))
-
-    zero = jnp.zeros((), jnp.int32)
-    one = jnp.ones((), z0.dtype)
-    # carry: iterate, its residuals, Jacobian, auxiliary values, objective, step, slope along it,
-    # trial length, history, accepted steps, consecutive rejections, started, done, converged
-    carry = (
-        z0,
-        jnp.zeros(r_shape.shape, r_shape.dtype),
-        jnp.zeros(jac_shape.shape, jac_shape.dtype),
-        jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), aux_shape),
-        jnp.asarray(jnp.inf, z0.dtype),
-        jnp.zeros_like(z0),
-        jnp.zeros((), z0.dtype),
-        one,
-        jnp.zeros(max_iter + 1, z0.dtype),
-        zero,
-        zero,
-        jnp.zeros((), bool),
-        jnp.zeros((), bool),
-        jnp.zeros((), bool),
-    )
-
-    def cond(carry):
-        return ~carry[-2]
+    evaluate_traced, shapes = trace_once(evaluate, z0)
+    zero, false = jnp.zeros((), jnp.int32), jnp.zeros((), bool)
+    # carry: the search, history, accepted steps, started, done, converged
+    carry = (start_search(z0, shapes), jnp.zeros(max_iter + 1, z0.dtype), zero, false, false, false)
 
     def body(carry):
-        z, r, jac, aux, f, d, slope, alpha, history, n, rejections, started, _, _ = carry
-        z_try = z + alpha * d  # z0 itself on the first pass (d = 0)
-        r_try, jac_try, aux_try = evaluate_traced(z_try)
-        f_try = jnp.sum(r_try * r_try)
-        # Strictly lower, too: once alpha * slope is below f's last digit, Armijo's test alone would
-        # accept an unchanged point; False for a NaN objective as well.
-        accept = ~started | ((f_try < f) & (f_try <= f + ARMIJO_SLOPE * alpha * slope))
-        n_new = jnp.where(accept & started, n + 1, n)
-        z, r, jac, aux, f = jax.tree.map(
-            lambda a, b: jnp.where(accept, a, b), (z_try, r_try, jac_try, aux_try, f_try), (z, r, jac, aux, f)
-        )
-        history = jnp.where(accept, history.at[jnp.clip(n_new, 0, max_iter)].set(f), history)
-        d_new, moved, predicted = proposal(r, jac)
-        d = jnp.where(accept, d_new, d)
-        slope = jnp.where(accept, 2 * jnp.sum(r * moved), slope)
-        alpha = jnp.where(accept, one, ARMIJO_FACTOR * alpha)
-        rejections = jnp.where(accept, zero, rejections + 1)
-        converged = accept & _converged(f, predicted, ftol, floor)
-        done = converged | (accept & (n_new >= max_iter)) | (rejections >= MAX_REJECTIONS)
-        started = jnp.ones((), bool)
-        return z, r, jac, aux, f, d, slope, alpha, history, n_new, rejections, started, done, converged
+        s, history, n, started, _, _ = carry
+        s, accept, predicted = search_step(s, evaluate_traced, ~started, minimum_norm)
+        n = jnp.where(accept & started, n + 1, n)
+        history = jnp.where(accept, history.at[jnp.clip(n, 0, max_iter)].set(s.f), history)
+        converged = accept & _converged(s.f, predicted, ftol, floor)
+        done = converged | (accept & (n >= max_iter)) | (s.rejections >= MAX_REJECTIONS)
+        return s, history, n, jnp.ones((), bool), done, converged
 
-    z, r, jac, aux, _, _, _, _, history, n, _, _, _, converged = jax.lax.while_loop(cond, body, carry)
-    return z, history, n, converged, r, jac, aux
+    s, history, n, _, _, converged = jax.lax.while_loop(lambda carry: ~carry[-2], body, carry)
+    return s.z, history, n, converged, s.r, s.jac, s.aux

@@ -89,6 +89,9 @@ class Model(eqx.Module):
     torque: object = eqx.field(static=True)
     reinit: bool = eqx.field(static=True)  # a held control: no torque carried across a step's end
     active: jax.Array  # int32 (): the first this many steps run; later samples are out of the window
+    # With a `_scheme.SchemeSwitch` as ``scheme``: which of its schemes runs, a runtime index (one program
+    # serves them all); None for a plain scheme.
+    choice: jax.Array | None = None
 
 
 SENSOR_SIZES = {"gyro_bias": 3, "gyro_scale": 3, "gyro_delay": 1, "tracker_mount": 3, "tracker_delay": 1}
@@ -187,9 +190,14 @@ def _step_args(model, d, user_args, j):
     return user_args, (d.step_start[j], d.control_value[j], d.control_slope[j], d.control_body)
 
 
+def _stepper(model):
+    """The scheme the model runs: its own, or the one its runtime ``choice`` picks from a switch."""
+    return model.scheme if model.choice is None else model.scheme.bind(model.choice)
+
+
 def _node_states(model, inertia, args, q0, omega0, d):
     """The modelled states ``q (N + 1, 4)``, ``ω (N + 1, 3)`` at every node of the step grid."""
-    scheme, torque = model.scheme, model.torque
+    scheme, torque = _stepper(model), model.torque
 
     def one(inner, j):
         def advance(inner):
@@ -211,7 +219,7 @@ def _node_states(model, inertia, args, q0, omega0, d):
 
 def _states_at(model, inertia, args, nodes, d, times):
     """The modelled states at arbitrary ``times`` ``(P + 1,)``: one step from the node before each."""
-    scheme, torque = model.scheme, model.torque
+    scheme, torque = _stepper(model), model.torque
     node_t = jnp.concatenate([d.step_start, d.step_start[-1:] + d.step_length[-1:]])
     last = jnp.minimum(d.step_start.shape[0], model.active) - 1
     # Past the window the nodes hold its last state: those samples (weight 0) get a short step from it.

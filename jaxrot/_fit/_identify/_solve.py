@@ -43,9 +43,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.extend.core import jaxpr_as_fun
 
-from .._optimiser import ARMIJO_FACTOR, ARMIJO_SLOPE, MAX_REJECTIONS, _converged, _least_squares_step
+from .._optimiser import MAX_REJECTIONS, Search, _converged, search_step, start_search, trace_once
 from ._experiment import KINDS
 from ._model import INDEX, residuals_and_jacobian
 
@@ -127,18 +126,10 @@ def _far(r, sigma, data):
 
 
 class _Carry(NamedTuple):
-    z: jax.Array
-    r: jax.Array
-    jac: jax.Array
-    aux: tuple
-    f: jax.Array  # objective at z
-    d: jax.Array  # Gauss–Newton step from z
-    slope: jax.Array  # the objective's slope along d
-    alpha: jax.Array  # the trial's fraction of d
+    search: Search  # `_optimiser`'s Gauss–Newton state: iterate, residuals, Jacobian, step, trial
     history: jax.Array
     slot: jax.Array  # next free entry of history
     n: jax.Array  # accepted Gauss–Newton steps, all passes
-    rejections: jax.Array  # consecutive ones
     stage: jax.Array  # windows 0 … n_windows − 1, then the whole record, then the refit
     active: jax.Array  # the stage's steps
     sigma: jax.Array  # (k, 3) the stage's noise levels
@@ -161,10 +152,10 @@ def history_size(max_iter):
 def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
     """Every pass of the fit in one `jax.lax.while_loop`: the `_Carry` at its end.
 
-    Each trial costs one evaluation of `residuals_and_jacobian`; a trial is accepted by Armijo's
-    test from the full step, halved up to `MAX_REJECTIONS` times (as `_optimiser.gauss_newton`,
-    whose step and stopping test it shares). A pass's start (``fresh``) evaluates the current
-    point under the pass's window or σ and accepts it without counting an iteration.
+    Each trial is `_optimiser.search_step` (the Gauss–Newton of `_optimiser.gauss_newton`: one
+    evaluation of `residuals_and_jacobian`, Armijo's test from the full step, halved up to
+    `MAX_REJECTIONS` times); this loop adds the passes. A pass's start (``fresh``) evaluates the
+    current point under the pass's window or σ and accepts it without counting an iteration.
     """
 
     def evaluate(z, active, sigma):
@@ -173,71 +164,31 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
 
     # Traced once here, called from the loop's body: one Jacobian program for every pass.
     total = plan.total.astype(INDEX)
-    traced, shapes = jax.make_jaxpr(evaluate, return_shape=True)(z0, total, model.data.sigma)
-    out_tree = jax.tree_util.tree_structure(shapes)
-    r_shape, jac_shape, aux_shape = shapes
-
-    def evaluate_traced(z, active, sigma):
-        return jax.tree_util.tree_unflatten(out_tree, jaxpr_as_fun(traced)(z, active, sigma))
-
-    zero, one = jnp.zeros((), jnp.int32), jnp.ones((), z0.dtype)
+    evaluate_traced, shapes = trace_once(evaluate, z0, total, model.data.sigma)
+    zero = jnp.zeros((), jnp.int32)
     false, true = jnp.zeros((), bool), jnp.ones((), bool)
     last = plan.n_windows  # the whole record's stage
     carry = _Carry(
-        z=z0,
-        r=jnp.zeros(r_shape.shape, r_shape.dtype),
-        jac=jnp.zeros(jac_shape.shape, jac_shape.dtype),
-        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), aux_shape),
-        f=jnp.asarray(jnp.inf, z0.dtype),
-        d=jnp.zeros_like(z0),
-        slope=jnp.zeros((), z0.dtype),
-        alpha=one,
-        history=jnp.zeros(size, z0.dtype),
-        slot=zero,
-        n=zero,
-        rejections=zero,
-        stage=last,
-        active=total,
-        sigma=model.data.sigma,
-        fresh=true,
-        probe=true,
-        windowed=false,
-        closing=false,
-        done=false,
-        converged=false,
-        evaluations=zero,
-    )
+        search=start_search(z0, shapes), history=jnp.zeros(size, z0.dtype), slot=zero, n=zero, stage=last,
+        active=total, sigma=model.data.sigma, fresh=true, probe=true, windowed=false, closing=false,
+        done=false, converged=false, evaluations=zero,
+    )  # fmt: skip
 
     def body(c):
-        r_try, jac_try, aux_try = evaluate_traced(c.z + c.alpha * c.d, c.active, c.sigma)
-        f_try = jnp.sum(r_try * r_try)
-        # Strictly lower, too: once alpha * slope is below f's last digit, Armijo's test alone would
-        # accept an unchanged point; False for a NaN objective as well.
-        accept = c.fresh | ((f_try < c.f) & (f_try <= c.f + ARMIJO_SLOPE * c.alpha * c.slope))
-        z, r, jac, aux, f = jax.tree.map(
-            lambda a, b: jnp.where(accept, a, b),
-            (c.z + c.alpha * c.d, r_try, jac_try, aux_try, f_try),
-            (c.z, c.r, c.jac, c.aux, c.f),
+        s, accept, predicted = search_step(
+            c.search, lambda z: evaluate_traced(z, c.active, c.sigma), c.fresh, minimum_norm=True
         )
         n = c.n + (accept & ~c.fresh).astype(jnp.int32)
         far = c.probe & (plan.n_windows > 0) & ((plan.use_windows == 1) | (
-            (plan.use_windows < 0) & _far(r, c.sigma, model.data)))  # fmt: skip
+            (plan.use_windows < 0) & _far(s.r, c.sigma, model.data)))  # fmt: skip
         # The refit's start is not recorded (its objective is the last pass's, reweighed).
         recorded = accept & ~far & ~(c.fresh & (c.stage > last))
-        history = jnp.where(accept, c.history.at[jnp.minimum(c.slot, c.history.size - 1)].set(f), c.history)
+        history = jnp.where(accept, c.history.at[jnp.minimum(c.slot, c.history.size - 1)].set(s.f), c.history)
         slot = c.slot + recorded.astype(jnp.int32)
 
-        d = _least_squares_step(jac, r, minimum_norm=True)
-        moved = jac @ d
-        predicted = -jnp.sum((2 * r + moved) * moved)
-        d = jnp.where(accept, d, c.d)
-        slope = jnp.where(accept, 2 * jnp.sum(r * moved), c.slope)
-        alpha = jnp.where(accept, one, ARMIJO_FACTOR * c.alpha)
-        rejections = jnp.where(accept, zero, c.rejections + 1)
-
         ftol = jnp.where(c.stage < last, jnp.asarray(WINDOW_FTOL, z0.dtype), plan.ftol)
-        settled = accept & ~far & _converged(f, predicted, ftol, _floor(c.sigma, plan))
-        capped = (accept & (n >= max_iter)) | (rejections >= MAX_REJECTIONS)
+        settled = accept & ~far & _converged(s.f, predicted, ftol, _floor(c.sigma, plan))
+        capped = (accept & (n >= max_iter)) | (s.rejections >= MAX_REJECTIONS)
         far = far & ~capped
         next_window = settled & (c.stage < last) & ~capped
         refit = settled & (c.stage == last) & plan.refit & ~capped
@@ -252,7 +203,7 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
         active = jnp.where(far | next_window, jnp.where(stage < last, window, total), c.active)
         active = jnp.where(reopen, total, active)
         k, n_max = model.data.t.shape
-        rss = jnp.sum((r.reshape(k, 3, n_max, 3) * c.sigma[:, :, None, None]) ** 2, axis=(2, 3))
+        rss = jnp.sum((s.r.reshape(k, 3, n_max, 3) * c.sigma[:, :, None, None]) ** 2, axis=(2, 3))
         sigma = jnp.where(
             refit,
             estimated_sigma(
@@ -261,11 +212,11 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
             c.sigma,
         )
         fresh = far | next_window | refit | reopen
-        d = jnp.where(fresh, jnp.zeros_like(d), d)
+        s = s._replace(d=jnp.where(fresh, jnp.zeros_like(s.d), s.d))
         done = converged | (capped & ~reopen) | c.closing
         return _Carry(
-            z, r, jac, aux, f, d, slope, alpha, history, slot, n, rejections, stage, active, sigma, fresh,
-            false, c.windowed | far, reopen, done, converged, c.evaluations + 1,
+            s, history, slot, n, stage, active, sigma, fresh, false, c.windowed | far, reopen, done,
+            converged, c.evaluations + 1,
         )  # fmt: skip
 
     return jax.lax.while_loop(lambda c: ~c.done, body, carry)
@@ -301,8 +252,8 @@ def solve(problem, settings, speed, *, use_windows=None) -> Solution:
         jnp.asarray(problem.phi0, dtype), model, plan, max_iter, history_size(settings.max_iter)
     )
     sigma = np.asarray(end.sigma, np.float64)
-    raw = np.asarray(end.r, np.float64).reshape(k, 3, n_max, 3) * sigma[:, :, None, None]
-    jac = np.asarray(end.jac, np.float64)
+    raw = np.asarray(end.search.r, np.float64).reshape(k, 3, n_max, 3) * sigma[:, :, None, None]
+    jac = np.asarray(end.search.jac, np.float64)
     if problem.estimated.any() and not int(end.stage) > len(steps):
         # One series, or stopped before the refit: σ estimated now, the same optimum, J rescaled.
         rss = np.sum(raw**2, axis=(2, 3))
@@ -312,8 +263,8 @@ def solve(problem, settings, speed, *, use_windows=None) -> Solution:
     model = eqx.tree_at(lambda m: m.data.sigma, model, jnp.asarray(sigma, dtype))
     # Sliced in NumPy: slicing the device array by a new length compiled a jit(dynamic_slice) each time.
     history = np.asarray(end.history, np.float64)[: max(int(end.slot), 1)]
-    states = tuple(np.asarray(x, np.float64) for x in end.aux)
+    states = tuple(np.asarray(x, np.float64) for x in end.search.aux)
     return Solution(
-        np.asarray(end.z, np.float64), history, int(end.n), bool(end.converged), raw, jac, states, model,
-        bool(end.windowed), int(end.evaluations),
+        np.asarray(end.search.z, np.float64), history, int(end.n), bool(end.converged), raw, jac, states,
+        model, bool(end.windowed), int(end.evaluations),
     )  # fmt: skip
