@@ -263,6 +263,20 @@ def gradient_compile_table(docs):
     return module.table(data["rows"]) + note
 
 
+def first_call_table(docs):
+    """`benchmarks/first_call.py`'s table of ``docs/first_call_cpu.json`` (that script loaded by its path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "_first_call_benchmark", docs.parent / "benchmarks" / "first_call.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    data = _read(docs, "first_call_cpu.json")
+    context = f" (cache columns: `{data['cache_line']}`; whole job {data['wall_s'] / 60:.1f} min)"
+    return module.table(data) + _provenance("first_call_cpu.json", data["machine"], context)
+
+
 def rotor_choice_table(docs, name="rotor_choice_cpu.json"):
     """The rotor's per-body step count against a fixed two at |ω|t = 0.3 (`benchmarks/rotor.py`, 2.)."""
     data = _read(docs, name)
