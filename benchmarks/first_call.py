@@ -89,6 +89,12 @@ def _hlo_ops(compiled):
     return sum(1 for line in hlo.splitlines() if " = " in line and not line.lstrip().startswith("//"))
 
 
+def _on_path():
+    """This checkout's package first (not an editable install of another checkout: a git worktree's
+    scripts would measure the main one's jaxrot), then benchmarks/ and tests/ (the problems' helpers)."""
+    sys.path[:0] = [str(HERE.parent), str(HERE), str(HERE.parent / "tests")]
+
+
 def measure_one(name, mode, cache_dir):
     """One cell in this process (a fresh one): the entry's first call in ``mode``."""
     import jax
@@ -96,7 +102,7 @@ def measure_one(name, mode, cache_dir):
     if mode != "off":
         jax.config.update("jax_compilation_cache_dir", cache_dir)  # the documented line
     before = dict(jax.config.values)
-    sys.path[:0] = [str(HERE), str(HERE.parent / "tests")]
+    _on_path()
     import jaxrot
 
     changed = sorted(k for k, v in jax.config.values.items() if before.get(k) != v)
@@ -268,6 +274,7 @@ def main():
         print(json.dumps(measure_one(*opts.one)))
         return
 
+    _on_path()
     from jaxrot.comparison import machine_info
 
     names = opts.entries.split(",") if opts.entries else (QUICK if opts.quick else list(ENTRIES))

@@ -2,6 +2,7 @@
 XLA options."""
 
 import json
+from pathlib import Path
 
 from _tables_format import _power_of_ten, _provenance, _read, _sig, _table
 
@@ -268,7 +269,7 @@ def first_call_table(docs):
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
-        "_first_call_benchmark", docs.parent / "benchmarks" / "first_call.py"
+        "_first_call_benchmark", Path(__file__).resolve().parents[2] / "benchmarks" / "first_call.py"
     )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
