@@ -135,9 +135,9 @@ JOBS = {
     "first_call": Job(
         ("first_call_cpu.json",),
         ("benchmarks/first_call.py", "--out", "docs/first_call_cpu.json"),
-        9,
+        10,
         quick=("benchmarks/first_call.py", "--quick", "--out", "{tmp}/first_call_cpu.json"),
-        quick_minutes=5,
+        quick_minutes=7,
         tables=("first_call_table",),
         sources=(
             *BASE,
