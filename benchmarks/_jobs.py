@@ -130,6 +130,32 @@ JOBS = {
         8,
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/compile.py"),
     ),
+    # The first call of jaxrot's public entries and their peers, split into JAX's stages, each cell in a
+    # fresh process, and again with the persistent compilation cache cold and warm (issue 72).
+    "first_call": Job(
+        ("first_call_cpu.json",),
+        ("benchmarks/first_call.py", "--out", "docs/first_call_cpu.json"),
+        10,
+        quick=("benchmarks/first_call.py", "--quick", "--out", "{tmp}/first_call_cpu.json"),
+        quick_minutes=7,
+        tables=("first_call_table",),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *FLUID,
+            *THERMAL,
+            *DIFFRAX,
+            *FIT,
+            *SCENES,
+            "jaxrot/comparison",
+            "jaxrot/__main__.py",
+            "benchmarks/first_call.py",
+            "benchmarks/compile.py",
+            "benchmarks/identify_speed.py",
+            "tests/_mujoco_telemetry.py",
+            "tests/_mujoco_sysid.py",
+        ),
+    ),
     "throughput": Job(
         ("throughput_cpu.json",),
         (

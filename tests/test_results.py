@@ -24,6 +24,8 @@ _GPU_RACE = "RACE_SCHEMES=splitting,rkmk_dopri8,rkmk_dopri8_cayley,srkn6b,srkn14
 # file -> (how its rows name the scheme, or None where its rows are not per scheme; what regenerates it)
 RESULTS = {
     "compile_cpu.json": ("method", "python benchmarks/regenerate.py --only compile"),
+    # First calls of the public entries and their peers (issue 72): entries, not schemes.
+    "first_call_cpu.json": (None, "python benchmarks/regenerate.py --only first_call"),
     "throughput_cpu.json": ("method", "python benchmarks/regenerate.py --only throughput"),
     "throughput_cpu_jax010.json": ("method", "python benchmarks/regenerate.py --only throughput_jax010"),
     # Three schemes, the ones XLA:CPU's YNN fusions slowed: not per scheme.

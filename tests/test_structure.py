@@ -157,7 +157,7 @@ def test_find_cycle_sees_cycles(tmp_path, files, cycle):
     assert find_cycle(import_graph(tmp_path, "pkg")) == cycle
 
 
-def test_importing_jaxrot_starts_no_jax_backend():
+def test_importing_jaxrot_starts_no_jax_backend_and_changes_no_setting():
     """A program configures JAX after its imports (``jax_num_cpu_devices``, ``jax.distributed``):
     a module that computes with JAX at import (a table checked with ``jnp``) starts the backend
     first and that configuration then raises. Measured: the exponential tableaux' import-time check
@@ -167,10 +167,15 @@ def test_importing_jaxrot_starts_no_jax_backend():
     modules = sorted(
         n for n in module_names(PACKAGE_DIR, "jaxrot") if "__main__" not in n and not n.startswith(OPTIONAL)
     )
+    # Nor does an import change a global JAX setting (x64, the compilation cache: DESIGN.md, "Compile
+    # time"): the user switches those on, in one line (docs/performance.md).
     program = (
         "import importlib, jax\n"
+        "before = dict(jax.config.values)\n"
         f"for name in {modules!r}:\n"
         "    importlib.import_module(name)\n"
+        "changed = sorted(k for k, v in jax.config.values.items() if before.get(k) != v)\n"
+        "assert not changed, f'importing jaxrot changed JAX settings {changed}'\n"
         "jax.config.update('jax_num_cpu_devices', 2)\n"
     )
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)

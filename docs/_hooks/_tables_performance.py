@@ -2,6 +2,7 @@
 XLA options."""
 
 import json
+from pathlib import Path
 
 from _tables_format import _power_of_ten, _provenance, _read, _sig, _table
 
@@ -261,6 +262,20 @@ def gradient_compile_table(docs):
     data = _read(docs, "compile_cpu.json")
     note = _provenance("compile_cpu.json", data["machine"], f" ({data['problem']})")
     return module.table(data["rows"]) + note
+
+
+def first_call_table(docs):
+    """`benchmarks/first_call.py`'s table of ``docs/first_call_cpu.json`` (that script loaded by its path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "_first_call_benchmark", Path(__file__).resolve().parents[2] / "benchmarks" / "first_call.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    data = _read(docs, "first_call_cpu.json")
+    context = f" (cache columns: `{data['cache_line']}`; whole job {data['wall_s'] / 60:.1f} min)"
+    return module.table(data) + _provenance("first_call_cpu.json", data["machine"], context)
 
 
 def rotor_choice_table(docs, name="rotor_choice_cpu.json"):

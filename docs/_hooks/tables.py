@@ -48,6 +48,7 @@ from _tables_jax_md import (  # noqa: E402
 from _tables_performance import (  # noqa: E402
     compile_table,
     cpu_vector_width_table,
+    first_call_table,
     gpu_passes_table,
     gpu_peer_throughput_table,
     gpu_race_table,
@@ -104,6 +105,7 @@ TABLES = {
     "throughput_table": throughput_table,
     "compile_table": compile_table,
     "gradient_compile_table": gradient_compile_table,
+    "first_call_table": first_call_table,
     "memory_table": memory_table,
     "compare_table": compare_table,
     "compare_budget_table": compare_budget_table,
