@@ -36,6 +36,35 @@ Q0 = quat.exp(jnp.array([0.3, -0.5, 0.7]))
 EZ = jnp.array([0.0, 0.0, 1.0])
 
 
+# The checks' quaternion algebra on already computed trajectories, in NumPy (each eager jnp operation
+# on a new shape compiles a small program: tens per test): `quat.multiply`, `quat.exp` and
+# `quat.angle_between` written out, in the arrays' own dtype.
+
+
+def _multiply(p, q):
+    pw, px, py, pz = (p[..., k] for k in range(4))
+    qw, qx, qy, qz = (q[..., k] for k in range(4))
+    return np.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
+
+
+def _exp(rotvec):
+    theta = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    return np.concatenate([np.cos(theta / 2), 0.5 * np.sinc(theta / (2 * np.pi)) * rotvec], axis=-1)
+
+
+def _angle_between(q1, q2):
+    d = _multiply(np.concatenate([q1[..., :1], -q1[..., 1:]], axis=-1), q2)
+    return 2 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
+
+
 def spheroid_fluid(dtype=jnp.float64):
     return jaxrot.Fluid.spheroid(LAMBDA, 1.0, 1.0, velocity_gradient=SHEAR.astype(dtype))
 
@@ -232,13 +261,13 @@ def test_a_sphere_turns_with_the_fluid_overdamped(dtype):
     fluid = jaxrot.Fluid.spheroid(1.0, 1.0, 1.0, velocity_gradient=SHEAR.astype(dtype))
     q0 = Q0.astype(dtype)
     n = 200
-    traj = jaxrot.overdamped_rollout(q0, fluid, 0.05, n, save_every=20)
-    omega = jnp.array([0.0, 0.0, -0.5], dtype)
+    traj = jax.tree.map(np.asarray, jaxrot.overdamped_rollout(q0, fluid, 0.05, n, save_every=20))
+    omega = np.array([0.0, 0.0, -0.5], dtype)
     np.testing.assert_allclose(
-        traj.omega, jnp.broadcast_to(omega, traj.omega.shape), atol=4 * float(jnp.finfo(dtype).eps)
+        traj.omega, np.broadcast_to(omega, traj.omega.shape), atol=4 * float(jnp.finfo(dtype).eps)
     )
-    exact = quat.multiply(quat.exp(traj.t[:, None].astype(dtype) * omega[None]), q0)
-    assert float(jnp.max(quat.angle_between(traj.q, exact))) < 8 * n * float(jnp.finfo(dtype).eps)
+    exact = _multiply(_exp(traj.t[:, None].astype(dtype) * omega[None]), np.asarray(q0))
+    assert float(np.max(_angle_between(traj.q, exact))) < 8 * n * float(jnp.finfo(dtype).eps)
 
 
 def test_jeffery_period_by_the_default_overdamped_scheme():
@@ -292,21 +321,41 @@ def test_overdamped_torque_sees_the_flows_rotation_and_must_not_depend_on_omega(
 # --- the inertial model with a fluid --------------------------------------------------------------
 
 
+@functools.cache
+def stiff_and_spin_up_run(name, dtype):
+    """40 steps of four bodies of their own frictions and moments (rows) in the shear, dt = 0.05, as
+    NumPy arrays: 0 and 1 the bodies of `test_no_nan_and_the_right_terminal_spin_at_a_stiffness_of_1e8`,
+    2 and 3 the sphere of `test_a_sphere_turns_with_the_fluid_after_its_spin_up` from two spins (four
+    bodies: three rows of three would read as one full tensor). One program per scheme and dtype serves
+    both tests (each body's run is its own: `test_fluid_rollouts_per_body_and_in_chunks`)."""
+    sphere = 8 * np.pi * jnp.ones(3)
+    fluid = jaxrot.Fluid(
+        jnp.stack([spheroid_fluid().friction, jnp.ones(3), sphere, sphere]).astype(dtype),
+        velocity_gradient=SHEAR.astype(dtype),
+        bretherton=jnp.array([spheroid_fluid().bretherton, 0.0, 0.0, 0.0], dtype),
+    )
+    stiff = 1e-8 / 0.05
+    inertia = jnp.stack(
+        [spheroid_inertia(stiff), stiff * jnp.ones(3), 1e-3 * 0.05 * sphere, 1e-3 * 0.05 * sphere]
+    )
+    omega0 = jnp.array([[0.0, 0, 0], [1.0, 1, 1], [2.0, -1.0, 3.0], [-1.0, 0.5, 0.0]], dtype)
+    state = jaxrot.RotState(jnp.tile(Q0, (4, 1)).astype(dtype), omega0)
+    return jax.tree.map(np.asarray, jaxrot.rollout(name, state, inertia.astype(dtype), 0.05, 40, fluid=fluid))
+
+
 @pytest.mark.parametrize("name", sorted(jaxrot.FLUID_SCHEMES))
 def test_a_sphere_turns_with_the_fluid_after_its_spin_up(name):
     """ζΔt/I = 1e3: after its spin-up the sphere turns at Ω to round-off, and each later step turns q
     by exp(Ω Δt) exactly (a fixed axis). The spin-up takes a few steps, not one: the first step's
-    error of order (I/ζ)|ω0 − Ω||Ω| (1e-9) shrinks by about (I/ζ)|Ω|/Δt per step."""
-    fluid = jaxrot.Fluid(8 * np.pi * jnp.ones(3), velocity_gradient=SHEAR)
-    inertia = 8 * np.pi * 1e-3 * 0.05 * jnp.ones(3)
-    state = jaxrot.RotState(Q0, jnp.array([2.0, -1.0, 3.0]))
-    traj = jaxrot.rollout(name, state, inertia, 0.05, 40, fluid=fluid)
-    omega = jnp.array([0.0, 0.0, -0.5])
-    np.testing.assert_allclose(
-        traj.omega[5:], jnp.broadcast_to(omega, traj.omega[5:].shape), atol=4 * 2.2e-16
-    )
-    turned = quat.multiply(quat.exp((traj.t[5:, None] - traj.t[5]) * omega[None]), traj.q[5])
-    assert float(jnp.max(quat.angle_between(traj.q[5:], turned))) < 40 * 8 * 2.2e-16
+    error of order (I/ζ)|ω0 − Ω||Ω| (1e-9) shrinks by about (I/ζ)|Ω|/Δt per step. The sphere, from two
+    spins, is bodies 2 and 3 of the run the stiffness test below checks (one program for both)."""
+    full = stiff_and_spin_up_run(name, jnp.float64)
+    omega = np.array([0.0, 0.0, -0.5])
+    for body in (2, 3):
+        q, spin = full.q[:, body], full.omega[:, body]
+        np.testing.assert_allclose(spin[5:], np.broadcast_to(omega, spin[5:].shape), atol=4 * 2.2e-16)
+        turned = _multiply(_exp((full.t[5:, None] - full.t[5]) * omega[None]), q[5])
+        assert float(np.max(_angle_between(q[5:], turned))) < 40 * 8 * 2.2e-16
 
 
 @pytest.fixture(scope="module")
@@ -328,8 +377,9 @@ def test_inertial_fluid_matches_the_reference_with_the_same_torque_as_a_plain_ca
         "exp_rk4", state, spheroid_inertia(1.0), 4.0 / 256, 256, torque=magnetic_torque, args=MAGNET,
         fluid=spheroid_fluid(), save_every=64,
     )  # fmt: skip
-    assert float(jnp.max(quat.angle_between(traj.q, stokes_one_reference.q))) < 1e-8
-    assert float(jnp.max(jnp.abs(traj.omega - stokes_one_reference.omega))) < 1e-8
+    reference = jax.tree.map(np.asarray, stokes_one_reference)
+    assert float(np.max(_angle_between(np.asarray(traj.q), reference.q))) < 1e-8
+    assert float(np.max(np.abs(np.asarray(traj.omega) - reference.omega))) < 1e-8
 
 
 # (name, Stokes number): ζΔt/I over the ladder below, 0.02 … 0.5 at St = 1 and 2e4 … 5e5 at 1e-6. The
@@ -363,21 +413,17 @@ def test_no_nan_and_the_right_terminal_spin_at_a_stiffness_of_1e8(name, dtype):
     """ζΔt/I = 1e8 from rest (ζ_⊥Δt/I_⊥ for the spheroid, body 0; ζΔt/I for the sphere, body 1,
     which is spun at 1 rad/s about every axis): finite; from the second step on the spheroid turns at
     the overdamped angular velocity (within I/ζ-sized terms: 1e-7 of it), from the third the sphere
-    at Ω to round-off (the first step's layer error, (I/ζ)·|ω0||Ω|, shrinks by a like factor a step)."""
+    at Ω to round-off (the first step's layer error, (I/ζ)·|ω0||Ω|, shrinks by a like factor a step).
+    40 steps (8 before), in the run whose body 2 is the spin-up test's sphere."""
     eps = float(jnp.finfo(dtype).eps)
-    fluid = jaxrot.Fluid(
-        jnp.stack([spheroid_fluid().friction, jnp.ones(3)]).astype(dtype),
-        velocity_gradient=SHEAR.astype(dtype),
-        bretherton=jnp.array([spheroid_fluid().bretherton, 0.0], dtype),
-    )
-    inertia = jnp.stack([spheroid_inertia(1e-8 / 0.05), 1e-8 / 0.05 * jnp.ones(3)]).astype(dtype)
-    state = jaxrot.RotState(jnp.tile(Q0, (2, 1)).astype(dtype), jnp.array([[0.0, 0, 0], [1.0, 1, 1]], dtype))
-    traj = jaxrot.rollout(name, state, inertia, 0.05, 8, fluid=fluid)
-    assert traj.q.dtype == dtype and bool(jnp.all(jnp.isfinite(traj.q)))
-    overdamped = spheroid_fluid(dtype).angular_velocity(traj.q[2:, 0])
-    np.testing.assert_allclose(traj.omega[2:, 0], overdamped, atol=1e-7 + 8 * eps)
-    spin = jnp.broadcast_to(jnp.array([0.0, 0.0, -0.5], dtype), traj.omega[3:, 1].shape)
-    np.testing.assert_allclose(traj.omega[3:, 1], spin, atol=4 * eps)
+    traj = stiff_and_spin_up_run(name, dtype)
+    assert traj.q.dtype == dtype and np.all(np.isfinite(traj.q))
+    # The overdamped velocity of every saved orientation in one program (not one per operation).
+    overdamped = jax.jit(lambda q: spheroid_fluid(dtype).angular_velocity(q))(traj.q[2:, 0])
+    omega = traj.omega
+    np.testing.assert_allclose(omega[2:, 0], overdamped, atol=1e-7 + 8 * eps)
+    spin = np.broadcast_to(np.array([0.0, 0.0, -0.5], dtype), omega[3:, 1].shape)
+    np.testing.assert_allclose(omega[3:, 1], spin, atol=4 * eps)
 
 
 def test_fluid_rollouts_per_body_and_in_chunks(default_emitters):
