@@ -27,8 +27,8 @@ geodesic angle at t_end. Measured, float64 (``jax_enable_x64``):
    of MJX's own map (h = 1e-5) and jaxrot's (rkmk4 and zhao). MJX's is 0: ``math.norm`` returns 0 with
    a zero gradient when every component is within 1e-8 (``jp.allclose(x, 0)``).
 
-    python benchmarks/mjx_peer.py --json docs/mjx_cpu.json        # full: ~8 min on 2 quiet cores
-    python benchmarks/mjx_peer.py --quick --json /tmp/mjx.json    # ~3 min
+    python benchmarks/mjx_peer.py --json docs/mjx_cpu.json        # full: ~6 min on 2 quiet cores (estimated)
+    python benchmarks/mjx_peer.py --quick --json /tmp/mjx.json    # ~4 min (9.9 min at 1.6 cores of load)
 
 Needs ``pip install -e ".[mjx]"``; without it, it says so and exits 0.
 """

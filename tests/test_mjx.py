@@ -88,7 +88,9 @@ def test_mjx_and_jaxrot_agree_on_the_heavy_top_at_a_fine_step(problems):
     """Same physics: MJX's RK4 at dt = 2.5e-4 (|ω|dt ≈ 1.5e-3) over 0.25 s and jaxrot's reference agree
     to its second-order error (measured order 2 on the rotation: C (|ω|dt)² |ω|T with C of order 1,
     ~5e-6 rad): within 1e-4 rad, and the error falls by about 4 when the step is halved."""
-    with jax.enable_x64(True):
+    # MJX mixes a bool into float arithmetic (math.normalize_with_norm) and broadcasts ranks: the suite
+    # refuses both (conftest.py), so MJX runs under jax's default promotion rules.
+    with jax.enable_x64(True), jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         xml, state, inertia, torque, args, t_end = problems["heavy_top"]
         ref = jaxrot.reference_rollout(state, inertia, jnp.array([0.0, t_end]), torque=torque, args=args)
         omega_b = quat.rotate(quat.conjugate(state.q), state.omega)
@@ -105,7 +107,9 @@ def test_mjx_finite_differences_at_rest_agree_with_jaxrots_gradient(problems):
     """At ω = 0 the two sides model the same motion: central finite differences of MJX's RK4 map equal
     jaxrot's gradient (1e-6: h = 1e-5 on a loss of order 1). MJX's own gradient there is reported by the
     benchmark, not asserted."""
-    with jax.enable_x64(True):
+    # MJX mixes a bool into float arithmetic (math.normalize_with_norm) and broadcasts ranks: the suite
+    # refuses both (conftest.py), so MJX runs under jax's default promotion rules.
+    with jax.enable_x64(True), jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         xml, state, inertia, *_ = problems["free_body"]
         n, dt = 20, 0.05
         final = mjx_peer.mjx_final(mjx_peer.mjx_model(xml("rk4", dt)), state.q, n)
