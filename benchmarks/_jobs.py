@@ -302,6 +302,25 @@ JOBS = {
         tables=("mujoco_free_body_speed",),
         sources=(*BASE, *VACUUM, "jaxrot/analytic.py", "benchmarks/mujoco_free_body.py"),
     ),
+    # MuJoCo XLA against jaxrot (needs `pip install -e ".[mjx]"`; without it the benchmark says so and
+    # writes nothing): orders, cost at equal error (1000 bodies), the gradient's cost and its value at rest.
+    "mjx": Job(
+        ("mjx_cpu.json",),
+        ("benchmarks/mjx_peer.py", "--json", "docs/mjx_cpu.json"),
+        9,
+        quick=("benchmarks/mjx_peer.py", "--quick", "--json", "{tmp}/mjx_cpu.json"),
+        quick_minutes=5,
+        tables=("mjx_orders_table", "mjx_cost_table", "mjx_gradient_table"),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *DIFFRAX,
+            *SCENES,
+            "jaxrot/_pivot.py",
+            "benchmarks/mujoco_free_body.py",
+            "benchmarks/mjx_peer.py",
+        ),
+    ),
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
     "thermal_orders": Job(
         ("thermal_orders.json",),

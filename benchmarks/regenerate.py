@@ -28,7 +28,8 @@ made there by hand with the commands of docs/performance.md ("On a GPU"), the se
 ``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
 left out. The ``jax_md_rigid`` job needs ``.[jax_md]`` (Python 3.12); without it, it says so and
 leaves its file as it was: run it with ``--only jax_md_rigid --python <py312 venv>/bin/python``. The
-``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``. Run from the
+``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``, the ``mjx`` job ``pip install -e ".[mjx]"``
+(without it, it says so and leaves its file as it was). Run from the
 repository root with a clean checkout: a results file made from uncommitted package or benchmark
 code carries ``+dirty`` in its commit (its source hashes still say what it measured).
 """

@@ -43,6 +43,8 @@ RESULTS = {
     "rotor_choice_cpu.json": (None, "python benchmarks/regenerate.py --only rotor_choice"),
     "mujoco_free_body_cpu.json": ("method", "python benchmarks/regenerate.py --only mujoco_free_body"),
     "compare_heavy_top.json": ("method", "python benchmarks/regenerate.py --only compare"),
+    # MuJoCo XLA against jaxrot (needs .[mjx]): MJX's integrators and four jaxrot schemes, not every scheme.
+    "mjx_cpu.json": (None, "python benchmarks/regenerate.py --only mjx"),
     # Bodies in a fluid: the fluid schemes and the overdamped ones, not jaxrot.SCHEMES.
     "fluid_orders.json": (None, "python benchmarks/regenerate.py --only fluid_orders"),
     "fluid_layer.json": (None, "python benchmarks/regenerate.py --only fluid_layer"),

@@ -45,6 +45,7 @@ from _tables_jax_md import (  # noqa: E402
     jax_md_energy_table,
     jax_md_temperature_table,
 )
+from _tables_mjx import mjx_cost_table, mjx_gradient_table, mjx_orders_table  # noqa: E402
 from _tables_performance import (  # noqa: E402
     compile_table,
     cpu_vector_width_table,
@@ -133,6 +134,9 @@ TABLES = {
     "rotor_choice_table": rotor_choice_table,
     "mujoco_free_body_accuracy": mujoco_free_body_accuracy,
     "mujoco_free_body_speed": mujoco_free_body_speed,
+    "mjx_orders_table": mjx_orders_table,
+    "mjx_cost_table": mjx_cost_table,
+    "mjx_gradient_table": mjx_gradient_table,
     "throughput_peer_ratios": throughput_peer_ratios,
     "throughput_jax_versions": throughput_jax_versions,
     "ynn_trap_table": ynn_trap_table,
