@@ -236,14 +236,20 @@ def test_round_trip_at_edge_cases(rotvec):
     np.testing.assert_allclose(quat.to_matrix(back), m, atol=8 * EPS)
 
 
+# Compiled, one program each for every point: eagerly, each operation of the Newton iteration's
+# derivatives compiled a program of its own (141 programs at the first point).
+JACREV = jax.jit(jax.jacrev(quat.from_matrix))
+JACFWD = jax.jit(jax.jacfwd(quat.from_matrix))
+
+
 @pytest.mark.parametrize("rotvec", EDGE_ROTVECS.values(), ids=EDGE_ROTVECS.keys())
 def test_gradient_is_finite_and_matches_finite_differences(rotvec):
     """The Newton polar iteration keeps the derivative finite at exact rotations, where an SVD's
     (1/(σᵢ² − σⱼ²)) is not. Away from the sign flip at w = 0 the Jacobian matches central
     differences of scipy's SVD projection (truncation ~h², round-off ~eps/h: 1e-7 at h = 1e-5)."""
     m = quat.to_matrix(quat.exp(jnp.asarray(rotvec)))
-    jac = jax.jacrev(quat.from_matrix)(m)
-    assert np.all(np.isfinite(jac)) and np.all(np.isfinite(jax.jacfwd(quat.from_matrix)(m)))
+    jac = JACREV(m)
+    assert np.all(np.isfinite(jac)) and np.all(np.isfinite(JACFWD(m)))
     if abs(float(quat.from_matrix(m)[0])) < 1e-3:
         return  # w = 0: -q and q swap across the point; only finiteness is asked there.
     h = 1e-5

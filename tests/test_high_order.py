@@ -5,6 +5,8 @@ round-off, against diffrax Dopri8 at rtol = atol = 1e-14, with an orientation-, 
 time- and (RKMK only) a velocity-dependent torque, diagonal and full inertia.
 """
 
+import functools
+
 import diffrax
 import jax
 import jax.numpy as jnp
@@ -52,6 +54,15 @@ LADDERS = {
     "srkn6b": (40, 80, 160),
     "srkn14a": (8, 11, 16),
 }
+
+
+def np_angle_between(q1, q2):
+    """`quaternion.angle_between` in numpy, on computed arrays (eagerly, each jnp operation compiles a
+    program of its own): 2 atan2(|vec(q1* ⊗ q2)|, |scalar(q1* ⊗ q2)|)."""
+    w1, v1, w2, v2 = q1[..., 0], q1[..., 1:], q2[..., 0], q2[..., 1:]
+    scalar = w1 * w2 + np.sum(v1 * v2, axis=-1)
+    vector = w1[..., None] * v2 - w2[..., None] * v1 - np.cross(v1, v2)
+    return 2 * np.arctan2(np.linalg.norm(vector, axis=-1), np.abs(scalar))
 
 
 def problem(kind, form):
@@ -224,19 +235,24 @@ def test_momentum_frame_keeps_the_order(name, frame, kind, form, ladder):
     assert measured_order(name, kind, form, scheme, ladder) == pytest.approx(scheme.order, abs=0.2)
 
 
-def _free_body_errors(scheme, state, dt, n):
-    """Largest orientation error of ``n`` steps on the free body (1, 2, 3), against the exact motion."""
-    traj = jaxrot.rollout(scheme, state, MOMENTS, dt, n)
-    exact = jaxrot.analytic.free_top(state, MOMENTS, dt * jnp.arange(n + 1.0))
-    return float(jnp.max(quat.angle_between(traj.q, exact.q)))
+# The exact free motion as one compiled program: called eagerly, each of its elliptic-function
+# operations compiles a program of its own (~20 per call shape).
+free_top = jax.jit(jaxrot.analytic.free_top)
 
 
 def test_body_momentum_is_sharper_than_world_momentum():
     """rkmk4 (body momentum) against the same tableau on the world momentum, 10 s of the tumbling
     free body at dt = 0.01: benchmarks/order4.py measures 8.4× (4.2e-9 against 3.6e-8 rad); 4× is
-    asked, far above the round-off (1e-13 here) of either."""
-    body = _free_body_errors("rkmk4", TUMBLING, 0.01, 1000)
-    world = _free_body_errors(jaxrot.schemes.RKMK4(momentum_frame="world"), TUMBLING, 0.01, 1000)
+    asked, far above the round-off (1e-13 here) of either. Largest orientation error of the 1000
+    steps against the exact motion (computed once for both)."""
+    exact = np.asarray(free_top(TUMBLING, MOMENTS, 0.01 * jnp.arange(1001.0)).q)
+
+    def error(scheme):
+        q = np.asarray(jaxrot.rollout(scheme, TUMBLING, MOMENTS, 0.01, 1000).q)
+        return float(np.max(np_angle_between(q, exact)))
+
+    body = error("rkmk4")
+    world = error(jaxrot.schemes.RKMK4(momentum_frame="world"))
     assert 1e-12 < 4 * body < world
 
 
@@ -273,28 +289,44 @@ def test_adaptive_solver_refuses_a_body_momentum():
 # --- dexp⁻¹ and exp at and near Θ = 0 -------------------------------------------------------
 
 
+# The chart functions of the tests below, each one compiled program shared by every scale (eagerly,
+# each operation of a function, and of its derivative, compiles a program of its own).
+W = np.array([1.0, 2.0, -0.5])
+CHARTS = {
+    "exp": (jax.jit(quat.exp), jax.jit(exp_and_dexpinv)),
+    "cayley": (jax.jit(quat.cayley), jax.jit(cayley_and_dcayinv)),
+}
+
+
+def _dexpinv_scalar(theta):
+    r, v = exp_and_dexpinv(theta, W)
+    return jnp.sum(r * jnp.arange(1.0, 5.0)) + jnp.sum(v * jnp.array([0.3, -1.0, 2.0]))
+
+
+_dexpinv_scalar_jit = jax.jit(_dexpinv_scalar)
+_dexpinv_grad = jax.jit(jax.grad(_dexpinv_scalar))
+
+
 @pytest.mark.parametrize("scale", [0.0, 1e-300, 1e-12, 1e-5, 1e-3, 0.3, 2.0])
 def test_exp_and_dexpinv_finite_and_true_near_zero(scale):
-    theta = scale * jnp.array([0.3, -0.5, 0.8])
-    w = jnp.array([1.0, 2.0, -0.5])
-    rotation, v = exp_and_dexpinv(theta, w)
-    np.testing.assert_allclose(rotation, quat.exp(theta), rtol=0, atol=2e-16)
+    theta = scale * np.array([0.3, -0.5, 0.8])
+    psi, pair = CHARTS["exp"]
+    rotation, v = (np.asarray(x) for x in pair(theta, W))
+    np.testing.assert_allclose(rotation, psi(theta), rtol=0, atol=2e-16)
     # dexp_Θ(dexp⁻¹_Θ(w)) = w, with dexp_Θ(v) = v + (1 − cos θ)/θ² Θ×v + (θ − sin θ)/θ³ Θ×(Θ×v)
     # (series below θ = 1e-3, whose truncation is then below 1e-16).
-    th = float(jnp.linalg.norm(theta))
+    th = float(np.linalg.norm(theta))
     a = (1 - np.cos(th)) / th**2 if th > 1e-3 else 0.5 - th**2 / 24
     b = (th - np.sin(th)) / th**3 if th > 1e-3 else 1 / 6 - th**2 / 120
-    back = v + a * jnp.cross(theta, v) + b * jnp.cross(theta, jnp.cross(theta, v))
-    np.testing.assert_allclose(back, w, rtol=0, atol=1e-14)
+    back = v + a * np.cross(theta, v) + b * np.cross(theta, np.cross(theta, v))
+    np.testing.assert_allclose(back, W, rtol=0, atol=1e-14)
 
-    def scalar(theta):
-        r, v = exp_and_dexpinv(theta, w)
-        return jnp.sum(r * jnp.arange(1.0, 5.0)) + jnp.sum(v * jnp.array([0.3, -1.0, 2.0]))
-
-    grad = jax.grad(scalar)(theta)
-    assert bool(jnp.all(jnp.isfinite(grad)))
+    grad = np.asarray(_dexpinv_grad(theta))
+    assert np.all(np.isfinite(grad))
     if scale in (1e-3, 0.3, 2.0):
-        np.testing.assert_allclose(grad, central_difference_grad(scalar, (theta,), 0), rtol=1e-7, atol=1e-9)
+        np.testing.assert_allclose(
+            grad, central_difference_grad(_dexpinv_scalar_jit, (theta,), 0), rtol=1e-7, atol=1e-9
+        )
 
 
 # --- the Cayley chart (`chart="cayley"`) ------------------------------------------------------
@@ -325,15 +357,26 @@ def test_chart_inverse_differential_is_the_inverse_of_the_chart_derivative(chart
     """``d/dε ψ(Θ + ε dψ⁻¹_Θ(w))`` at ε = 0 is the rate ``½ w ⊗ ψ(Θ)`` of a body turning at world ``w``:
     the defining property of ``dψ⁻¹``, checked by forward-mode AD (exact to round-off, a few ulp of
     |w| ≈ 2.3 per operation); values and gradients finite down to Θ = 0."""
-    psi, pair = {"exp": (quat.exp, exp_and_dexpinv), "cayley": (quat.cayley, cayley_and_dcayinv)}[chart]
-    theta = scale * jnp.array([0.3, -0.5, 0.8])
-    w = jnp.array([1.0, 2.0, -0.5])
-    rotation, v = pair(theta, w)
+    psi, pair = CHARTS[chart]
+    theta = scale * np.array([0.3, -0.5, 0.8])
+    rotation, v = pair(theta, W)
     np.testing.assert_allclose(rotation, psi(theta), rtol=0, atol=4e-16)
-    _, rate = jax.jvp(psi, (theta,), (v,))
-    np.testing.assert_allclose(rate, 0.5 * quat.multiply(quat.pure(w), rotation), rtol=0, atol=1e-14)
-    grad = jax.grad(lambda th: jnp.sum(pair(th, w)[1] * jnp.array([0.3, -1.0, 2.0])))(theta)
-    assert bool(jnp.all(jnp.isfinite(grad)))
+    rate, expected = _chart_rate(chart, theta, v, rotation)
+    np.testing.assert_allclose(rate, expected, rtol=0, atol=1e-14)
+    assert np.all(np.isfinite(_chart_grad(chart, theta)))
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _chart_rate(chart, theta, v, rotation):
+    """``(d/dε ψ(Θ + ε v) at ε = 0, ½ w ⊗ rotation)``, one program per chart for every scale."""
+    psi = {"exp": quat.exp, "cayley": quat.cayley}[chart]
+    return jax.jvp(psi, (theta,), (v,))[1], 0.5 * quat.multiply(quat.pure(jnp.asarray(W)), rotation)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _chart_grad(chart, theta):
+    pair = {"exp": exp_and_dexpinv, "cayley": cayley_and_dcayinv}[chart]
+    return jax.grad(lambda th: jnp.sum(pair(th, W)[1] * jnp.array([0.3, -1.0, 2.0])))(theta)
 
 
 def test_cayley_chart_metadata_and_validation():
@@ -487,10 +530,18 @@ def test_float32_round_off_of_the_rotor_splittings(name):
     (measured 3.4e-5; splitting and srkn6b round 1/15 and 7/15 as often). 1e-4 leaves a factor 3."""
     state = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), TUMBLING)
     traj = jaxrot.rollout(name, state, MOMENTS.astype(jnp.float32), 0.01, 1000, save_every=1000)
-    start = jaxrot.RotState(quat.normalize(state.q.astype(jnp.float64)), state.omega.astype(jnp.float64))
-    exact = jaxrot.analytic.free_top(start, MOMENTS, jnp.array([0.0, 10.0]))
+    exact = _float32_start_exact()
     assert traj.q.dtype == jnp.float32
-    assert float(quat.angle_between(traj.q[-1].astype(jnp.float64), exact.q[-1])) < 1e-4
+    assert float(np_angle_between(np.asarray(traj.q[-1], np.float64), exact)) < 1e-4
+
+
+@functools.cache
+def _float32_start_exact():
+    """The exact orientation at t = 10 from the float32-rounded tumbling start (the same for every
+    scheme of the test above: computed once)."""
+    q = np.asarray(TUMBLING.q, np.float32).astype(np.float64)
+    start = jaxrot.RotState(q / np.linalg.norm(q), np.asarray(TUMBLING.omega, np.float32).astype(np.float64))
+    return np.asarray(free_top(start, MOMENTS, jnp.array([0.0, 10.0])).q[-1])
 
 
 @pytest.mark.parametrize("name", LIE_RK)

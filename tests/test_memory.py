@@ -1,9 +1,11 @@
 """A rollout's compiled memory depends on the saved states, not on the number of steps."""
 
+import functools
 import sys
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 from helpers import contract_params
 
@@ -11,17 +13,25 @@ import jaxrot
 from jaxrot._integrate import _blocking, _run
 
 
+@functools.cache
 def bodies(n):
-    """``n`` bodies at distinct orientations, all spinning at (1, 1, 1)."""
-    q = jaxrot.quaternion.exp(jnp.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
-    return jaxrot.RotState(q, jnp.ones((n, 3)))
+    """``n`` bodies at distinct orientations, all spinning at (1, 1, 1). Built once per ``n`` and in
+    one compiled program (eagerly, each of `exp`'s operations compiles a program of its own)."""
+    q = jax.jit(jaxrot.quaternion.exp)(np.linspace(0.1, 1.0, 3 * n).reshape(n, 3))
+    return jaxrot.RotState(q, jnp.asarray(np.ones((n, 3))))
+
+
+@functools.cache
+def heavy_top():
+    """The heavy-top scene, built once (its construction runs eager operations)."""
+    return jaxrot.SCENES["heavy_top"]()
 
 
 def compiled_memory(scheme, n_bodies, n_steps, save_every, gradient=False):
     """XLA's memory accounting of a heavy-top rollout of ``n_bodies``, or with ``gradient`` of
     ``jax.grad`` of its last saved orientations with respect to the inertia."""
     state = bodies(n_bodies)
-    top = jaxrot.SCENES["heavy_top"]()
+    top = heavy_top()
 
     def run(state, inertia):
         return jaxrot.rollout(
@@ -110,7 +120,7 @@ def test_a_gradient_keeps_each_steps_carry_not_its_stages(scheme):
         n_steps: compiled_memory(scheme, n, n_steps, n_steps, gradient=True).temp_size_in_bytes
         for n_steps in (100, 200)
     }
-    top = jaxrot.SCENES["heavy_top"]()
+    top = heavy_top()
     carry = jax.eval_shape(
         lambda s: jaxrot.SCHEMES[scheme].init(s, 0.0, top.inertia, top.torque, top.args),
         jax.tree_util.tree_map(lambda x: x[0], bodies(1)),  # one body

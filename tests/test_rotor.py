@@ -1,8 +1,9 @@
 """The fast free rotor `jaxrot._free_body._rotor.free_rotor` against the exact `jaxrot.analytic.free_motion`.
 
-Every test reads the shared batches below, evaluated once per dtype (each compiled program costs
-seconds on 2 cores): random states with |ω| = 1 for several bodies and times, plus the special
-cases (ω = 0, t = 0, sphere, symmetric tops, t < 0, outside the valid range).
+Every test reads the shared batches below, evaluated once per dtype, each output when a test first
+reads it (each compiled program costs seconds on 2 cores): random states with |ω| = 1 for several
+bodies and times, plus the special cases (ω = 0, t = 0, sphere, symmetric tops, t < 0, outside the
+valid range).
 """
 
 import functools
@@ -61,21 +62,37 @@ N_ORDER = len(ORDER_TIMES) * N_STATES
 
 
 @functools.cache
-def results():
+def _inputs():
     """One batch, so that each program compiles once: rows ``[:N_RANDOM]`` random (every body ×
-    time × state), then ``N_ORDER`` rows for the order test (body (1, 2, 3)), then `SPECIAL`.
-    Returns the inputs and the exact, rotor (float64, float32) and one-step rotor outputs."""
+    time × state), then ``N_ORDER`` rows for the order test (body (1, 2, 3)), then `SPECIAL`."""
     q, w = _states(N_STATES)
     rows = [(qi, wi, body, t) for body in BODIES for t in TIMES for qi, wi in zip(q, w, strict=True)]
     rows += [(qi, wi, BODIES[0], t) for t in ORDER_TIMES for qi, wi in zip(q, w, strict=True)]
     q0 = np.asarray(Q0)
     rows += [(q0, np.asarray(quat.rotate(Q0, jnp.array(v[0]))), v[1], v[2]) for v in SPECIAL.values()]
-    inputs = tuple(jnp.asarray(np.array([r[k] for r in rows])) for k in range(4))
-    exact = _batched(analytic.free_motion)(*inputs)
-    rotor = jax.jit(free_rotor)(*inputs)  # leading axes broadcast, as under vmap
-    rotor32 = _batched(free_rotor)(*(a.astype(jnp.float32) for a in inputs))
-    one_step = _batched(functools.partial(free_rotor, substeps=1))(*inputs)
-    return inputs, exact, rotor, rotor32, one_step
+    return tuple(jnp.asarray(np.array([r[k] for r in rows])) for k in range(4))
+
+
+# Each output of the batch is computed (compiled) when a test first reads it: the default set reads
+# the rotor's only; the exact motion and the one-step rotor are the slow tests' (seconds of compiles).
+@functools.cache
+def _exact():
+    return _batched(analytic.free_motion)(*_inputs())
+
+
+@functools.cache
+def _rotor_out():
+    return jax.jit(free_rotor)(*_inputs())  # leading axes broadcast, as under vmap
+
+
+@functools.cache
+def _rotor32():
+    return _batched(free_rotor)(*(a.astype(jnp.float32) for a in _inputs()))
+
+
+@functools.cache
+def _one_step():
+    return _batched(functools.partial(free_rotor, substeps=1))(*_inputs())
 
 
 def _rows(tree, start, stop):
@@ -91,7 +108,7 @@ def _errors(a, b):
 def test_matches_exact_motion_to_round_off():
     """Round-off (a few hundred ulp in both solutions) at every |ω| |t|: the rotor takes steps of at
     most 0.2 rad (`_bound`)."""
-    inputs, exact, rotor, _, _ = results()
+    inputs, exact, rotor = _inputs(), _exact(), _rotor_out()
     angle, omega = _errors(_rows(rotor, 0, N_RANDOM), _rows(exact, 0, N_RANDOM))
     assert np.all(np.isfinite(angle)) and np.all(np.isfinite(omega))
     bound = _bound(np.abs(np.asarray(inputs[3][:N_RANDOM])))  # |ω| = 1
@@ -112,7 +129,7 @@ def _bound(turn, loop_batch=1):
 def test_order_ten_in_t():
     """One DMV10 step (``substeps=1``): local error ∝ t^11 (Hairer & Vilmart's order 10). A wrong
     coefficient of degree k in the modified moments would leave order 2k <= 8 (slope <= 9)."""
-    _, exact, _, _, one_step = results()
+    exact, one_step = _exact(), _one_step()
     rows = slice(N_RANDOM, N_RANDOM + N_ORDER)
     angle, omega = _errors(_rows(one_step, rows.start, rows.stop), _rows(exact, rows.start, rows.stop))
     worst = [
@@ -126,45 +143,55 @@ def test_order_ten_in_t():
 
 def test_invariants_and_unit_quaternion():
     """|L|, the energy and |q| after one call, from the float64 results: a few ulp."""
-    inputs, _, rotor, _, _ = results()
-    (q, w, moments, _), (q1, w1) = _rows(inputs, 0, N_RANDOM), _rows(rotor, 0, N_RANDOM)
+    (q, w, moments, _), (q1, w1) = _rows(_inputs(), 0, N_RANDOM), _rows(_rotor_out(), 0, N_RANDOM)
+
+    q, w, moments, q1, w1 = (np.asarray(a) for a in (q, w, moments, q1, w1))
 
     def invariants(q, w):
-        u = quat.rotate(quat.conjugate(q), w)
-        return jnp.linalg.norm(moments * u, axis=-1), jnp.sum(moments * u * u, axis=-1)
+        u = _body_frame(q, w)
+        return np.linalg.norm(moments * u, axis=-1), np.sum(moments * u * u, axis=-1)
 
     (l0, e0), (l1, e1) = invariants(q, w), invariants(q1, w1)
     eps = np.finfo(np.float64).eps
     assert np.max(np.abs(l1 / l0 - 1)) < 32 * eps
     assert np.max(np.abs(e1 / e0 - 1)) < 64 * eps
-    assert np.max(np.abs(jnp.linalg.norm(q1, axis=-1) - 1)) < 4 * eps
+    assert np.max(np.abs(np.linalg.norm(q1, axis=-1) - 1)) < 4 * eps
 
 
-def _special(name):
+def _body_frame(q, w):
+    """``quat.rotate(quat.conjugate(q), w)`` in numpy, on computed arrays (eagerly, each jnp operation
+    compiles a program of its own): ``w + s t + v × t`` with ``t = 2 v × w``, ``(s, v)`` = conj(q)."""
+    s, v = q[..., :1], -q[..., 1:]
+    t = 2 * np.cross(v, w)
+    return w + s * t + np.cross(v, t)
+
+
+def _special(name, exact=True):
+    """Row ``name`` of (inputs, exact motion, rotor); without ``exact``, None for the exact motion."""
     i = N_RANDOM + N_ORDER + list(SPECIAL).index(name)
-    inputs, exact, rotor, _, _ = results()
-    return tuple(jax.tree.map(lambda a: a[i], tree) for tree in (inputs, exact, rotor))
+    trees = (_inputs(), _exact() if exact else None, _rotor_out())
+    return tuple(None if tree is None else jax.tree.map(lambda a: a[i], tree) for tree in trees)
 
 
 def test_special_cases_closed_forms():
     eps = np.finfo(np.float64).eps
-    (q, w, _, _), _, (q1, w1) = _special("omega_zero")
+    (q, w, _, _), _, (q1, w1) = _special("omega_zero", exact=False)
     np.testing.assert_allclose(q1, q, atol=4 * eps)
     np.testing.assert_array_equal(w1, 0)
-    (q, w, _, _), _, (q1, w1) = _special("t_zero")
+    (q, w, _, _), _, (q1, w1) = _special("t_zero", exact=False)
     np.testing.assert_allclose(q1, q, atol=4 * eps)
     np.testing.assert_allclose(w1, w, atol=8 * eps)
     # Sphere: rotation at constant ω, q(t) = exp(ω t) ⊗ q0. A DMV step of angle θ turns by θ' with
     # sin θ' = θ (modified moment × I), and the modified moments are the series of sin θ / θ to θ^8:
     # each of the two steps (θ = |ω|t/2) falls short by θ^11 / (11! cos θ), 1.1e-14 in all here.
-    (q, w, _, t), _, (q1, w1) = _special("sphere")
+    (q, w, _, t), _, (q1, w1) = _special("sphere", exact=False)
     theta = float(jnp.linalg.norm(w) * t) / 2
     truncation = 2 * theta**11 / (math.factorial(11) * math.cos(theta))
     assert float(quat.angle_between(q1, quat.multiply(quat.exp(w * t), q))) < truncation + 8 * eps
     np.testing.assert_allclose(w1, w, atol=8 * eps)
     # Spin about a principal axis (even the unstable intermediate one) is steady: ω exactly, the
     # angle within the truncation bound of the random states.
-    (q, w, _, t), _, (q1, w1) = _special("steady_intermediate")
+    (q, w, _, t), _, (q1, w1) = _special("steady_intermediate", exact=False)
     angle = float(quat.angle_between(q1, quat.multiply(quat.exp(w * t), q)))
     assert angle < _bound(float(jnp.linalg.norm(w) * t)), angle
     np.testing.assert_allclose(w1, w, atol=8 * eps)
@@ -181,7 +208,7 @@ def test_special_cases_against_exact(name):
 
 def test_outside_valid_range_is_nan():
     """The needle's modified moments lose their digits to cancellation: NaN, not noise."""
-    _, _, (q1, w1) = _special("needle_long")
+    _, _, (q1, w1) = _special("needle_long", exact=False)
     assert np.all(np.isnan(q1)) and np.all(np.isnan(w1))
 
 
@@ -338,7 +365,7 @@ def test_long_run_conservation(dtype):
     """
     n_calls, n_bodies = 10_000, 64
     moments = jnp.array([1.0, 2.0, 3.0], dtype)
-    r = quat.exp(jnp.array([0.4, -0.7, 0.25], dtype))
+    r = jax.jit(quat.exp)(jnp.array([0.4, -0.7, 0.25], dtype))
     q, w = (jnp.asarray(a, dtype) for a in _states(n_bodies, seed=3))
     step = jax.vmap(lambda q, w: free_rotor(q, w, moments, jnp.asarray(0.05, dtype)))
 
@@ -353,7 +380,7 @@ def test_long_run_conservation(dtype):
     def invariants(q, w):
         q, w, m = (np.asarray(a, np.float64) for a in (q, w, moments))
         q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-        u = np.asarray(quat.rotate(quat.conjugate(jnp.asarray(q)), jnp.asarray(w)))
+        u = _body_frame(q, w)
         return np.linalg.norm(m * u, axis=-1), np.sum(m * u * u, axis=-1)
 
     (l0, e0), (l1, e1) = invariants(q, w), invariants(*run(q, w))
@@ -369,8 +396,8 @@ def test_long_run_conservation(dtype):
 
 
 def test_float32_keeps_dtype_and_accuracy():
-    _, _, rotor, (q1, w1), _ = results()
-    q64, w64 = _rows(rotor, 0, N_RANDOM)
+    q64, w64 = _rows(_rotor_out(), 0, N_RANDOM)
+    q1, w1 = _rotor32()
     q1, w1 = q1[:N_RANDOM], w1[:N_RANDOM]
     assert q1.dtype == jnp.float32 and w1.dtype == jnp.float32
     # Two DMV10 steps in float32: truncation ~7e-10 at |ω| t = 0.5, the rest is float32 round-off.

@@ -83,12 +83,27 @@ def test_batch_in_one_solve_equals_rollout():
     np.testing.assert_allclose(sol.ys.omega[-1], traj.omega[-1], rtol=0, atol=1e-12)
 
 
+# One reference for the adaptive and the dense-output tests below (a reference program compiles for
+# seconds): at the adaptive tests' 9 save times and the dense tests' 16 off-step times (and t = 0).
+# Its steps do not depend on the save times (diffrax interpolates the saves), so each row is what a
+# reference at that test's times alone gives.
+SAVE_TS = np.linspace(0.0, T_END, 9)
+OFF_STEP_TS = np.concatenate([[0.0], T_END * (np.arange(16) + 0.37) / 16])
+REFERENCE_TS = np.union1d(SAVE_TS, OFF_STEP_TS)
+
+
 @pytest.fixture(scope="module")
 def reference():
-    ts = jnp.linspace(0.0, T_END, 9)
     return jaxrot.reference_rollout(
-        STATE, MOMENTS, ts, torque=_drag_torque, args=ARGS, rtol=1e-14, atol=1e-14
+        STATE, MOMENTS, jnp.asarray(REFERENCE_TS), torque=_drag_torque, args=ARGS, rtol=1e-14, atol=1e-14
     )
+
+
+def _reference_at(reference, ts):
+    """The reference's rows at ``ts`` (a subset of `REFERENCE_TS`)."""
+    rows = np.searchsorted(REFERENCE_TS, ts)
+    assert np.array_equal(REFERENCE_TS[rows], ts)
+    return jaxrot.Trajectory(*(np.asarray(a)[rows] for a in reference))
 
 
 def _adaptive(name, tol, ts, **kwargs):
@@ -115,7 +130,8 @@ def test_adaptive_error_follows_the_tolerance(name, tol, reference):
     this (chaotic-free, mildly damped) top the global error stays below 100 tol. |q| - 1 is the
     round-off of one normalisation plus the group interpolation's exp: a few eps, 1e-12 is ample.
     """
-    sol = _adaptive(name, tol, reference.t)
+    reference = _reference_at(reference, SAVE_TS)
+    sol = _adaptive(name, tol, jnp.asarray(reference.t))
     assert isinstance(jaxrot.solver(name), diffrax.AbstractAdaptiveSolver)
     error = float(jnp.max(quat.angle_between(sol.ys.q, reference.q)))
     assert error < 100 * tol
@@ -123,12 +139,10 @@ def test_adaptive_error_follows_the_tolerance(name, tol, reference):
     assert float(jnp.max(jnp.abs(jnp.linalg.norm(sol.ys.q, axis=-1) - 1))) < 1e-12
 
 
-def _dense_errors(name, steps):
+def _dense_errors(name, steps, reference):
     """Max orientation and ω errors of the dense output between the steps, for each step count."""
-    ts_ref = jnp.asarray(np.sort(np.concatenate([[0.0], T_END * (np.arange(16) + 0.37) / 16])))
-    ref = jaxrot.reference_rollout(
-        STATE, MOMENTS, ts_ref, torque=_drag_torque, args=ARGS, rtol=1e-14, atol=1e-14
-    )
+    ref = _reference_at(reference, OFF_STEP_TS)
+    ts_ref = jnp.asarray(ref.t)
     errors = []
     for n in steps:
         sol = _solve(name, STATE, MOMENTS, _drag_torque, T_END, T_END / n, saveat=diffrax.SaveAt(ts=ts_ref))
@@ -152,9 +166,9 @@ def _dense_errors(name, steps):
         pytest.param("zhao", [32, 64, 128], 2, 2, marks=pytest.mark.slow),
     ],
 )
-def test_dense_output_order(name, steps, q_order, omega_order):
+def test_dense_output_order(name, steps, q_order, omega_order, reference):
     """Orders of the dense output at off-step times (log-log slope within ±0.3 of the claim)."""
-    errors = _dense_errors(name, steps)
+    errors = _dense_errors(name, steps, reference)
     h = T_END / np.asarray(steps)
     q_slope = np.polyfit(np.log(h), np.log(errors[:, 0]), 1)[0]
     omega_slope = np.polyfit(np.log(h), np.log(errors[:, 1]), 1)[0]

@@ -207,7 +207,7 @@ def heat_kernel_rotation(normals, s, large_steps: bool = True):
         >>> import jax, jax.numpy as jnp
         >>> from jaxrot.schemes._heat_kernel import heat_kernel_rotation
         >>> xi = jax.random.normal(jax.random.key(0), (20000, 3))
-        >>> q = jax.vmap(heat_kernel_rotation, (0, None))(xi, 0.5)  # s = D h = 0.5
+        >>> q = jax.jit(jax.vmap(heat_kernel_rotation, (0, None)))(xi, 0.5)  # s = D h = 0.5
         >>> cos_angle = 2 * q[:, 0] ** 2 - 1
         >>> round(float(jnp.mean(1 + 2 * cos_angle) / 3), 2), round(float(jnp.exp(-2 * 0.5)), 2)
         (0.37, 0.37)
