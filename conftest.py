@@ -73,7 +73,12 @@ def _release_compiled_code():
 
 # Long items that cannot carry a decorator: the notebooks (also executed by the documentation build,
 # `mkdocs build`, in .ci/run) and the longest docstring examples. Run them with `pytest -m slow`.
-SLOW_ITEMS = ("notebooks/", "jaxrot/stability.py::", "jaxrot/comparison.py::", "jaxrot/jax_md/_simulate.py::")
+SLOW_ITEMS = (
+    "notebooks/",
+    "jaxrot/stability.py::",
+    "jaxrot/comparison/__init__.py::",
+    "jaxrot/jax_md/_simulate.py::",
+)
 
 
 # The jax_md adapter and its notebook import jax_md, an optional extra (`pip install -e ".[jax_md]"`,
@@ -85,6 +90,12 @@ collect_ignore_glob = (
 
 
 def pytest_collection_modifyitems(config, items):
+    # A module that moves (jaxrot/comparison.py became a package) would silently put its long
+    # examples back into the default set: every named file must exist.
+    root = os.path.dirname(__file__)
+    missing = [p for p in SLOW_ITEMS if p.endswith("::") and not os.path.exists(os.path.join(root, p[:-2]))]
+    if missing:
+        raise pytest.UsageError(f"conftest.SLOW_ITEMS names files that do not exist: {missing}")
     for item in items:
         if item.nodeid.startswith(SLOW_ITEMS):
             item.add_marker(pytest.mark.slow)

@@ -11,7 +11,7 @@ Example:
     >>> rows = comparison.compare(t_end=0.5, particles=2, coarse_steps=10, levels=2, schemes=["zhao"],
     ...                           solvers=["diffrax_tsit5"], tolerances=(1e-6,), repeats=1, progress=False)
     >>> [(r["method"], r["n_steps"]) for r in rows]
-    [('zhao', 10), ('zhao', 20), ('diffrax_tsit5', 9)]
+    [('zhao', 10), ('zhao', 20), ('diffrax_tsit5', 8)]
     >>> print(comparison.format_recommendation(rows))  # doctest: +ELLIPSIS
     fastest within error budget [rad] ...
 """
