@@ -307,7 +307,7 @@ JOBS = {
     "mjx": Job(
         ("mjx_cpu.json",),
         ("benchmarks/mjx_peer.py", "--json", "docs/mjx_cpu.json"),
-        9,
+        3,  # measured: 3.0 min on 2 quiet cores, 2026-11-29
         quick=("benchmarks/mjx_peer.py", "--quick", "--json", "{tmp}/mjx_cpu.json"),
         quick_minutes=5,
         tables=("mjx_orders_table", "mjx_cost_table", "mjx_gradient_table"),
