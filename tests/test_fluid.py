@@ -13,6 +13,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import np_quat
 import numpy as np
 import pytest
 from helpers import fitted_order
@@ -34,35 +35,6 @@ SHEAR = jnp.zeros((3, 3)).at[0, 1].set(1.0)  # u = (y, 0, 0): Ω = (0, 0, -1/2)
 LAMBDA = 4.0
 Q0 = quat.exp(jnp.array([0.3, -0.5, 0.7]))
 EZ = jnp.array([0.0, 0.0, 1.0])
-
-
-# The checks' quaternion algebra on already computed trajectories, in NumPy (each eager jnp operation
-# on a new shape compiles a small program: tens per test): `quat.multiply`, `quat.exp` and
-# `quat.angle_between` written out, in the arrays' own dtype.
-
-
-def _multiply(p, q):
-    pw, px, py, pz = (p[..., k] for k in range(4))
-    qw, qx, qy, qz = (q[..., k] for k in range(4))
-    return np.stack(
-        [
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ],
-        axis=-1,
-    )
-
-
-def _exp(rotvec):
-    theta = np.linalg.norm(rotvec, axis=-1, keepdims=True)
-    return np.concatenate([np.cos(theta / 2), 0.5 * np.sinc(theta / (2 * np.pi)) * rotvec], axis=-1)
-
-
-def _angle_between(q1, q2):
-    d = _multiply(np.concatenate([q1[..., :1], -q1[..., 1:]], axis=-1), q2)
-    return 2 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 
 def spheroid_fluid(dtype=jnp.float64):
@@ -266,8 +238,8 @@ def test_a_sphere_turns_with_the_fluid_overdamped(dtype):
     np.testing.assert_allclose(
         traj.omega, np.broadcast_to(omega, traj.omega.shape), atol=4 * float(jnp.finfo(dtype).eps)
     )
-    exact = _multiply(_exp(traj.t[:, None].astype(dtype) * omega[None]), np.asarray(q0))
-    assert float(np.max(_angle_between(traj.q, exact))) < 8 * n * float(jnp.finfo(dtype).eps)
+    exact = np_quat.multiply(np_quat.exp(traj.t[:, None].astype(dtype) * omega[None]), np.asarray(q0))
+    assert float(np.max(np_quat.angle_between(traj.q, exact))) < 8 * n * float(jnp.finfo(dtype).eps)
 
 
 def test_jeffery_period_by_the_default_overdamped_scheme():
@@ -354,8 +326,8 @@ def test_a_sphere_turns_with_the_fluid_after_its_spin_up(name):
     for body in (2, 3):
         q, spin = full.q[:, body], full.omega[:, body]
         np.testing.assert_allclose(spin[5:], np.broadcast_to(omega, spin[5:].shape), atol=4 * 2.2e-16)
-        turned = _multiply(_exp((full.t[5:, None] - full.t[5]) * omega[None]), q[5])
-        assert float(np.max(_angle_between(q[5:], turned))) < 40 * 8 * 2.2e-16
+        turned = np_quat.multiply(np_quat.exp((full.t[5:, None] - full.t[5]) * omega[None]), q[5])
+        assert float(np.max(np_quat.angle_between(q[5:], turned))) < 40 * 8 * 2.2e-16
 
 
 @pytest.fixture(scope="module")
@@ -378,7 +350,7 @@ def test_inertial_fluid_matches_the_reference_with_the_same_torque_as_a_plain_ca
         fluid=spheroid_fluid(), save_every=64,
     )  # fmt: skip
     reference = jax.tree.map(np.asarray, stokes_one_reference)
-    assert float(np.max(_angle_between(np.asarray(traj.q), reference.q))) < 1e-8
+    assert float(np.max(np_quat.angle_between(np.asarray(traj.q), reference.q))) < 1e-8
     assert float(np.max(np.abs(np.asarray(traj.omega) - reference.omega))) < 1e-8
 
 

@@ -21,6 +21,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import np_quat
 import numpy as np
 import pytest
 from scipy.integrate import quad_vec
@@ -49,21 +50,8 @@ def band(sigma, n, bias=0.0):
     return 4 * sigma / math.sqrt(n) + bias
 
 
-# The observables of already computed trajectories, in NumPy: each eager jnp operation on a new shape
-# compiles a small program (tens of them per test); these are `quat.rotate`, `quat.conjugate` and the
-# diagonal of `quat.to_matrix` written out (scalar first, body -> world).
-
-
-def _rotate(q, v):
-    q, v = np.asarray(q), np.asarray(v)
-    w, u = q[..., :1], q[..., 1:]
-    t = 2 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
-def _conjugate(q):
-    q = np.asarray(q)
-    return np.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
+# The observables of already computed trajectories, in NumPy (`np_quat`): each eager jnp operation on
+# a new shape compiles a small program.
 
 
 def _axes_overlap(q):
@@ -218,10 +206,10 @@ def test_langevin_equipartition_and_dipole(langevin_run):
     name, traj = langevin_run
     bias = LANGEVIN_BIAS[name]
     later = slice(traj.t.shape[0] // 2, None)  # t >= 4: the scheme's own equilibrium
-    spin = _rotate(_conjugate(traj.q[later]), traj.omega[later])
+    spin = np_quat.rotate(np_quat.conjugate(traj.q[later]), traj.omega[later])
     energy = np.mean(spin**2, axis=(0, 1)) * np.asarray(INERTIA)  # kT = 1
     np.testing.assert_array_less(np.abs(energy - 1), band(math.sqrt(2), 2 * N_EACH, bias["energy"]))
-    cos_theta = _rotate(traj.q[later, :N_EACH], EZ)[..., 2]
+    cos_theta = np_quat.rotate(traj.q[later, :N_EACH], EZ)[..., 2]
     assert abs(float(cos_theta.mean()) - L_DIPOLE) < band(SIGMA_COS, N_EACH, bias["cos"])
     np.testing.assert_allclose(np.sum(traj.q**2, axis=-1), 1.0, atol=1e-14)
 
@@ -232,7 +220,7 @@ def test_langevin_free_angular_momentum_correlation_is_exact(langevin_run):
     _, traj = langevin_run
     q, omega = traj.q[:, N_EACH:], traj.omega[:, N_EACH:]
     inertia = np.asarray(INERTIA)
-    momentum = _rotate(q, inertia * _rotate(_conjugate(q), omega))
+    momentum = np_quat.rotate(q, inertia * np_quat.rotate(np_quat.conjugate(q), omega))
     correlation = np.mean(np.sum(momentum * momentum[:1], axis=-1), axis=1)
     exact = inertia.sum() * np.exp(-2 * traj.t)
     sigma = math.sqrt(np.sum(inertia**2) + inertia.sum() ** 2)
@@ -279,7 +267,7 @@ def brownian_run(request):
 def test_brownian_dipole(brownian_run):
     name, traj = brownian_run
     later = slice(traj.t.shape[0] // 2, None)
-    cos_theta = _rotate(traj.q[later, :N_EACH], EZ)[..., 2]
+    cos_theta = np_quat.rotate(traj.q[later, :N_EACH], EZ)[..., 2]
     limit = band(SIGMA_COS, N_EACH, BROWNIAN_BIAS[name])
     assert abs(float(cos_theta.mean()) - L_DIPOLE) < limit
     np.testing.assert_allclose(np.sum(traj.q**2, axis=-1), 1.0, atol=1e-14)
