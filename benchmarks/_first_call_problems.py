@@ -167,27 +167,12 @@ def _mujoco(side):
             raise ImportError("mujoco.sysid without its extra")
     except ImportError as error:
         raise Skip(f"{error}: pip install -e '.[mujoco]'") from None
-    import jax.numpy as jnp
-    import numpy as np
-
-    import jaxrot
-    from jaxrot import quaternion as quat
+    from identify_speed import mujoco_identify
 
     manoeuvres = mt.manoeuvres(noise_seed=0)
     if side == "sysid":
         return lambda: ms.sysid_fit(manoeuvres, fit_initial_state=True).inertia
-    experiments = [
-        jaxrot.Experiment(
-            m.t, q=m.q, omega_body=m.omega_body, sigma_q=m.sigma_q, sigma_omega=m.sigma_omega,
-            control=(m.t_c, m.tau_c), control_frame="body", control_hold="previous",
-        )
-        for m in manoeuvres
-    ]  # fmt: skip
-    q0 = np.stack([m.q[0] for m in manoeuvres])
-    omega0 = np.asarray(
-        quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
-    )
-    return lambda: jaxrot.identify(experiments, inertia0=ms.INERTIA0, q0=q0, omega0=omega0).inertia
+    return lambda: mujoco_identify(manoeuvres).inertia
 
 
 def _fit_inertia():

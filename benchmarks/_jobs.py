@@ -150,6 +150,7 @@ JOBS = {
             "jaxrot/comparison",
             "jaxrot/__main__.py",
             "benchmarks/first_call.py",
+            "benchmarks/_first_call_problems.py",
             "benchmarks/compile.py",
             "benchmarks/identify_speed.py",
             "tests/_mujoco_telemetry.py",

@@ -154,6 +154,25 @@ def residuals(p, args):
 Z95 = 1.959963984540054
 
 
+def mujoco_identify(manoeuvres):
+    """`jaxrot.identify` on MuJoCo's manoeuvres (`tests/_mujoco_telemetry.py`; needs MuJoCo): their held
+    body-frame motor torques, the initial states from the first samples as the start."""
+    import _mujoco_sysid as ms
+
+    experiments = [
+        jaxrot.Experiment(
+            m.t, q=m.q, omega_body=m.omega_body, sigma_q=m.sigma_q, sigma_omega=m.sigma_omega,
+            control=(m.t_c, m.tau_c), control_frame="body", control_hold="previous",
+        )
+        for m in manoeuvres
+    ]  # fmt: skip
+    q0 = np.stack([m.q[0] for m in manoeuvres])
+    omega0 = np.asarray(
+        quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
+    )
+    return jaxrot.identify(experiments, inertia0=ms.INERTIA0, q0=q0, omega0=omega0)
+
+
 def mujoco_rows(n_seeds):
     """The jaxrot / mujoco.sysid comparison on MuJoCo's data (module docstring), or None without MuJoCo."""
     try:
@@ -170,18 +189,7 @@ def mujoco_rows(n_seeds):
     upper = np.triu_indices(3)
 
     def jaxrot_fit(manoeuvres):
-        experiments = [
-            jaxrot.Experiment(
-                m.t, q=m.q, omega_body=m.omega_body, sigma_q=m.sigma_q, sigma_omega=m.sigma_omega,
-                control=(m.t_c, m.tau_c), control_frame="body", control_hold="previous",
-            )
-            for m in manoeuvres
-        ]  # fmt: skip
-        q0 = np.stack([m.q[0] for m in manoeuvres])
-        omega0 = np.asarray(
-            quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
-        )
-        fit = jaxrot.identify(experiments, inertia0=ms.INERTIA0, q0=q0, omega0=omega0)
+        fit = mujoco_identify(manoeuvres)
         return np.asarray(fit.inertia), fit.stderr.inertia
 
     def sysid_fit(manoeuvres, fit_initial_state):
