@@ -154,9 +154,9 @@ def residuals(p, args):
 Z95 = 1.959963984540054
 
 
-def mujoco_identify(manoeuvres):
-    """`jaxrot.identify` on MuJoCo's manoeuvres (`tests/_mujoco_telemetry.py`; needs MuJoCo): their held
-    body-frame motor torques, the initial states from the first samples as the start."""
+def mujoco_identify_inputs(manoeuvres):
+    """``(experiments, keywords)`` of `jaxrot.identify` for MuJoCo's manoeuvres (`tests/_mujoco_telemetry.py`;
+    needs MuJoCo): their held body-frame motor torques, the initial states from the first samples."""
     import _mujoco_sysid as ms
 
     experiments = [
@@ -170,7 +170,7 @@ def mujoco_identify(manoeuvres):
     omega0 = np.asarray(
         quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
     )
-    return jaxrot.identify(experiments, inertia0=ms.INERTIA0, q0=q0, omega0=omega0)
+    return experiments, {"inertia0": ms.INERTIA0, "q0": q0, "omega0": omega0}
 
 
 def mujoco_rows(n_seeds):
@@ -189,7 +189,8 @@ def mujoco_rows(n_seeds):
     upper = np.triu_indices(3)
 
     def jaxrot_fit(manoeuvres):
-        fit = mujoco_identify(manoeuvres)
+        experiments, keywords = mujoco_identify_inputs(manoeuvres)
+        fit = jaxrot.identify(experiments, **keywords)
         return np.asarray(fit.inertia), fit.stderr.inertia
 
     def sysid_fit(manoeuvres, fit_initial_state):
