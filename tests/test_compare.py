@@ -311,20 +311,26 @@ def test_fit_order_recovers_a_known_slope():
     assert fit_order(dts, 3.0 * dts**2) == pytest.approx(2.0, abs=1e-12)
 
 
-def test_each_fixed_step_ladder_compiles_one_program(monkeypatch):
-    """dt and the step count are runtime values of one program per scheme, not one program per rung."""
+def test_each_ladder_compiles_one_program(monkeypatch):
+    """dt and the step count are runtime values of one program per scheme, the tolerance of one
+    program per adaptive solver: not one program per rung."""
     built = []
-    original = comparison._ladder._fixed_runner
+    for runner in ("_fixed_runner", "_adaptive_runner"):
+        original = getattr(comparison._ladder, runner)
 
-    def counting(problem, scheme):
-        built.append(scheme.name)
-        return original(problem, scheme)
+        def counting(problem, method, original=original):
+            built.append(getattr(method, "name", method))
+            return original(problem, method)
 
-    monkeypatch.setattr(comparison._ladder, "_fixed_runner", counting)
+        monkeypatch.setattr(comparison._ladder, runner, counting)
     rows = compare(
-        t_end=0.2, particles=1, coarse_steps=5, levels=3, schemes=["zhao", "rkmk4"], solvers=[],
-        repeats=1, progress=False,
+        t_end=0.2, particles=1, coarse_steps=5, levels=3, schemes=["zhao", "rkmk4"],
+        solvers=["diffrax_tsit5"], tolerances=(1e-4, 1e-6), repeats=1, progress=False,
     )  # fmt: skip
-    assert built == ["zhao", "rkmk4"]
+    assert built == ["zhao", "rkmk4", "diffrax_tsit5"]
     assert [r["n_steps"] for r in rows if r["method"] == "zhao"] == [5, 10, 20]
     assert len({r["compile_s"] for r in rows if r["method"] == "zhao"}) == 1
+    adaptive = [r for r in rows if r["method"] == "diffrax_tsit5"]
+    assert [r["tol"] for r in adaptive] == [1e-4, 1e-6]
+    assert adaptive[1]["n_steps"] > adaptive[0]["n_steps"]  # the runtime tolerance reached the controller
+    assert len({r["compile_s"] for r in adaptive}) == 1

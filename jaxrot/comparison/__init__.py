@@ -48,6 +48,7 @@ from ._report import (
 )
 from ._timing import (
     MIN_TIMED_S as MIN_TIMED_S,
+    compile_timed as compile_timed,
     time_compiled as time_compiled,
     time_runs as time_runs,
 )
@@ -66,6 +67,7 @@ __all__ = [
     "TOLERANCES",
     "budget_table",
     "compare",
+    "compile_timed",
     "fit_order",
     "format_budget_table",
     "format_recommendation",

@@ -9,7 +9,6 @@ scene's body and its first particle is compared with a tight diffrax reference.
 A new scheme gets its rows with no change here.
 """
 
-import time
 from typing import Any, NamedTuple
 
 import diffrax
@@ -33,7 +32,7 @@ from ._report import (
     ASYMPTOTIC_ERROR,
     stalled,
 )
-from ._timing import time_compiled, time_runs
+from ._timing import compile_timed, time_runs
 
 
 REFERENCE_TOL = 1e-13
@@ -137,8 +136,9 @@ def compare(
     ``us_per_particle_run`` (median compiled wall time over ``particles``
     vmapped bodies, per particle-step and per particle over the whole horizon)
     and ``compile_s`` (seconds to compile the row's program: a fixed-step scheme compiles one
-    program for its whole ladder, ``dt`` and the step count runtime values, and each of its rows
-    carries that program's time). Every program compiles with `jaxrot.compiler_options`.
+    program for its whole ladder, ``dt`` and the step count runtime values, an adaptive solver one
+    for all its tolerances, and each row carries its program's time). Every program compiles with
+    `jaxrot.compiler_options`.
     """
     tolerances, schemes, solvers = _check_compare_arguments(
         scene, dtype, particles, coarse_steps, levels, repeats, tolerances, schemes, solvers
@@ -153,7 +153,9 @@ def compare(
         if name in finished:
             continue
         if kind == "adaptive":
-            rows.append(_adaptive_row(problem, name, level, repeats))
+            if name not in runners:
+                runners[name] = _adaptive_runner(problem, name)
+            rows.append(_adaptive_row(problem, name, runners[name], level, repeats))
             continue
         if name not in runners:
             runners[name] = _fixed_runner(problem, SCHEMES[name])
@@ -300,14 +302,12 @@ def _fixed_runner(problem: _Problem, scheme):
         return RotState(q, omega)
 
     example = (p.batch, jnp.asarray(p.dt_coarse, DTYPES[p.dtype]), jnp.asarray(1, jnp.int32))
-    start = time.perf_counter()
     try:
-        compiled = jax.jit(run, compiler_options=compiler_options()).lower(*example).compile()
+        return compile_timed(run, *example, compiler_options=compiler_options())
     except ValueError as err:
         if "depends on the angular velocity" not in str(err):
             raise
         return None
-    return compiled, time.perf_counter() - start
 
 
 def _fixed_row(problem: _Problem, name, runner, level, repeats):
@@ -324,12 +324,16 @@ def _fixed_row(problem: _Problem, name, runner, level, repeats):
     return _row(problem, method, traj, n_steps, evals, seconds, compile_s)
 
 
-def _adaptive_row(problem: _Problem, name, tol, repeats):
-    """diffrax solver ``name`` with adaptive steps at rtol = atol = ``tol``."""
-    solver, order, calls_per_step = ADAPTIVE_SOLVERS[name]
+def _adaptive_runner(problem: _Problem, name):
+    """``(compiled, compile s)``: diffrax solver ``name``'s one program for every tolerance.
+
+    ``run(state, tol)`` with rtol = atol = ``tol`` a runtime value: the tolerance ladder compiles
+    one program per solver instead of one per rung (15 → 3 programs in `compare`'s default).
+    """
+    solver = ADAPTIVE_SOLVERS[name][0]
     p = problem
 
-    def run(state):
+    def run(state, tol):
         q, omega = state.q.reshape(-1, 4), state.omega.reshape(-1, 3)
         traj, result, steps = adaptive_solve(
             solver(), q, omega, p.inertia, p.per_particle, p.ts.astype(q.dtype),
@@ -342,10 +346,19 @@ def _adaptive_row(problem: _Problem, name, tol, repeats):
             steps,
         )
 
-    (traj, result, steps), compile_s, seconds = time_compiled(run, p.batch, repeats, compiler_options())
+    tol = jnp.asarray(1e-3, p.batch.q.dtype)
+    return compile_timed(run, p.batch, tol, compiler_options=compiler_options())
+
+
+def _adaptive_row(problem: _Problem, name, runner, tol, repeats):
+    """diffrax solver ``name`` with adaptive steps at rtol = atol = ``tol``, run by its `_adaptive_runner`."""
+    _, order, calls_per_step = ADAPTIVE_SOLVERS[name]
+    compiled, compile_s = runner
+    args = (problem.batch, jnp.asarray(tol, problem.batch.q.dtype))
+    (traj, result, steps), seconds = time_runs(compiled, args, repeats)
     if np.any(np.asarray(result != diffrax.RESULTS.successful)):
         raise RuntimeError(f"compare: {name} failed at tol={tol:g}; use looser tolerances.")
     mean_steps = float(np.mean(np.asarray(steps)))  # bodies of a cloud take different steps
     evals = int(round(calls_per_step * mean_steps)) + 1
     method = {"method": name, "kind": "adaptive", "order": order, "dt": None, "tol": tol}
-    return _row(p, method, traj, int(round(mean_steps)), evals, seconds, compile_s)
+    return _row(problem, method, traj, int(round(mean_steps)), evals, seconds, compile_s)

@@ -15,11 +15,16 @@ def time_compiled(fn, arg, repeats, compiler_options=None):
     ``compiler_options`` go to ``jax.jit`` (`jaxrot.compiler_options` for jaxrot's programs).
     Compilation is timed alone (``lower().compile()``); the runs are timed by `time_runs`.
     """
-    start = time.perf_counter()
-    compiled = jax.jit(fn, compiler_options=compiler_options).lower(arg).compile()
-    compile_s = time.perf_counter() - start
+    compiled, compile_s = compile_timed(fn, arg, compiler_options=compiler_options)
     out, seconds = time_runs(compiled, (arg,), repeats)
     return out, compile_s, seconds
+
+
+def compile_timed(fn, *example, compiler_options=None):
+    """``(compiled, compile s)``: ``fn`` lowered and compiled alone for the ``example`` arguments."""
+    start = time.perf_counter()
+    compiled = jax.jit(fn, compiler_options=compiler_options).lower(*example).compile()
+    return compiled, time.perf_counter() - start
 
 
 def time_runs(compiled, args, repeats):
