@@ -238,6 +238,24 @@ JOBS = {
         ),
         timed=False,
     ),
+    # Accuracy only: energy and momentum against |ω|Δt over 1e5 steps, every vacuum scheme and MJX's
+    # integrators (MJX's rows need `pip install -e ".[mjx]"`; without it they are left out, saying so).
+    "energy_growth": Job(
+        ("energy_growth.json",),
+        ("benchmarks/energy_growth.py", "--json", "docs/energy_growth.json"),
+        6,
+        sources=(
+            *BASE,
+            *VACUUM,
+            *SCENES,
+            "jaxrot/diagnostics.py",
+            "jaxrot/_pivot.py",
+            "benchmarks/energy_growth.py",
+            "benchmarks/mjx_peer.py",
+            "benchmarks/mujoco_free_body.py",
+        ),
+        timed=False,
+    ),
     # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
     "order4": Job(
         ("order4.json",),
