@@ -92,7 +92,7 @@ def summary(scene, t, q, omega, save_every):
     early = EARLY_STEPS // save_every + 1
 
     def largest(x):  # NaN unless every sample is finite (XLA's max may skip NaNs: not trusted here)
-        return jnp.where(ok, jnp.max(jnp.where(finite, jnp.abs(x), 0.0)), jnp.nan)
+        return jnp.where(ok, jnp.max(jnp.where(finite[: len(x)], jnp.abs(x), 0.0)), jnp.nan)
 
     return {
         "energy_max": largest(change),
