@@ -133,8 +133,8 @@ def test_zhao_gains_energy_and_the_gain_grows_with_the_run():
 
 
 def test_zhaos_1_percent_step_is_below_the_symplectic_schemes_and_mjx_rk4():
-    """docs/stability.md and zhao.md: the smallest of the second-order schemes on every body, several
-    (≥ 3) times below no_squish's and splitting's."""
+    """docs/stability.md, zhao.md and schemes/index.md: the smallest of the second-order schemes on
+    every body, several (≥ 3) times below no_squish's and splitting's."""
     for body in BODIES:
         zhao = ROWS["zhao", body]["energy_limit"]
         assert zhao is not None
