@@ -238,6 +238,27 @@ JOBS = {
         ),
         timed=False,
     ),
+    # Accuracy only: energy and momentum against |ω|Δt over 1e5 steps, every vacuum scheme and MJX's
+    # integrators (MJX's rows need `pip install -e ".[mjx]"`; without it they are left out, saying so).
+    "energy_growth": Job(
+        ("energy_growth.json",),
+        ("benchmarks/energy_growth.py", "--json", "docs/energy_growth.json"),
+        # 10.1 min at 0.39 of a core beside 1.61 cores of other work (2026-11-29): 237 core-seconds,
+        # so about 4 min on 2 quiet cores (estimated; its programs use one core at a time)
+        5,
+        tables=("energy_limits_table",),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *SCENES,
+            "jaxrot/diagnostics.py",
+            "jaxrot/_pivot.py",
+            "benchmarks/energy_growth.py",
+            "benchmarks/mjx_peer.py",
+            "benchmarks/mujoco_free_body.py",
+        ),
+        timed=False,
+    ),
     # Accuracy only: the fourth-order Lie-group methods (MuJoCo's row needs `pip install mujoco`).
     "order4": Job(
         ("order4.json",),

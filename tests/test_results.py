@@ -36,6 +36,8 @@ RESULTS = {
     "cpu_vector_width.json": ("scheme", "python benchmarks/cpu_options.py --json docs/cpu_vector_width.json"),
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
+    # Energy and momentum against |ω|Δt over 1e5 steps: every scheme and MJX's integrators.
+    "energy_growth.json": ("method", "python benchmarks/regenerate.py --only energy_growth"),
     "identify_speed_cpu.json": (None, "python benchmarks/regenerate.py --only identify_speed"),
     # The fourth-order Lie-group methods and MuJoCo's RK4: methods, not schemes.
     "order4.json": (None, "python benchmarks/regenerate.py --only order4"),

@@ -26,6 +26,7 @@ from _tables_accuracy import (  # noqa: E402
     stability_drift_table,
     stability_limits_table,
 )
+from _tables_energy import energy_drift_table, energy_limits_table, readme_energy_sentence  # noqa: E402
 from _tables_fluid import (  # noqa: E402
     fluid_layer_table,
     fluid_orders_table,
@@ -85,7 +86,7 @@ from _tables_thermal import (  # noqa: E402
 
 
 # The hook's entry point, its tables, and the race's ratios that tests/test_readme.py reads.
-__all__ = ["TABLES", "on_page_markdown", "race_ratios"]
+__all__ = ["TABLES", "on_page_markdown", "race_ratios", "readme_energy_sentence"]
 
 TABLES = {
     "scheme_models_table": scheme_models_table,
@@ -124,6 +125,9 @@ TABLES = {
     "stability_limits_table": stability_limits_table,
     "stability_blow_up_table": stability_blow_up_table,
     "stability_drift_table": stability_drift_table,
+    "energy_limits_table": energy_limits_table,
+    "energy_drift_table": energy_drift_table,
+    "readme_energy_sentence": readme_energy_sentence,
     "identify_speed_table": identify_speed_table,
     "identify_sysid_table": identify_sysid_table,
     "overdamped_cost_table": overdamped_cost_table,
