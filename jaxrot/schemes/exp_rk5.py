@@ -108,13 +108,15 @@ class ExpRK5(AbstractExponentialLieRK):
     for parabolic problems", J. Comput. Appl. Math. 262 (2014), section 5 (expRK5s8).
 
     Example:
-        >>> import jax.numpy as jnp, jaxrot
-        >>> shear = jnp.zeros((3, 3)).at[0, 1].set(1.0)
-        >>> fluid = jaxrot.Fluid.spheroid(1.0, 1.0, viscosity=1.0, velocity_gradient=shear)
-        >>> s = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.zeros(3))
-        >>> traj = jaxrot.rollout("exp_rk5", s, 1e-3 * jnp.ones(3), 0.1, 50, fluid=fluid)
-        >>> traj.omega[-1].round(6).tolist()  # a sphere turns with the fluid: half the vorticity
-        [0.0, 0.0, -0.5]
+        >>> import jaxrot
+        >>> s = jaxrot.FLUID_SCHEMES["exp_rk5"]
+        >>> s.order, s.torque_evals_per_step, s.has_error_estimate  # `jaxrot.solver` makes it adaptive
+        (5, 8, True)
+
+    `jaxrot.rollout("exp_rk5", state, inertia, dt, n_steps, fluid=fluid)` runs it as
+    `jaxrot.schemes.ExpRK4` is run; ``diffrax.diffeqsolve(jaxrot.RigidBodyTerm(inertia, torque,
+    fluid=fluid), jaxrot.solver("exp_rk5"), …, stepsize_controller=diffrax.PIDController(…))``
+    adaptively (tests/test_exp_rk5.py).
     """
 
     name: ClassVar[str] = "exp_rk5"
