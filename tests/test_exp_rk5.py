@@ -177,3 +177,18 @@ def test_a_term_and_solver_of_different_models_are_refused():
         )
     with pytest.raises(ValueError, match=r"`fluid.kT` must be a concrete 0"):
         jaxrot.RigidBodyTerm(INERTIA, None, fluid=jaxrot.Fluid(jnp.ones(3), kT=1.0))
+
+
+def test_a_fixed_step_exponential_solver_in_a_fluid_is_the_rollout_without_its_graded_start():
+    """``jaxrot.solver("exp_midpoint")`` on the same term at a constant step: `jaxrot.rollout`'s
+    steps without the graded start (the same arithmetic: ten steps apart by round-off, 1e-14)."""
+    solver = jaxrot.solver("exp_midpoint")
+    assert not isinstance(solver, diffrax.AbstractAdaptiveSolver)
+    sol = diffrax.diffeqsolve(
+        TERM, solver, 0.0, 0.5, 0.05, STATE, args=100.0, saveat=diffrax.SaveAt(t1=True),
+        stepsize_controller=diffrax.ConstantStepSize(),
+    )  # fmt: skip
+    plain = jaxrot.schemes.ExpMidpoint(graded_start=False)
+    traj = jaxrot.rollout(plain, STATE, INERTIA, 0.05, 10, torque=_magnet, args=100.0, fluid=FLUID)
+    np.testing.assert_allclose(sol.ys.q[0], traj.q[-1], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(sol.ys.omega[0], traj.omega[-1], rtol=0, atol=1e-13)
