@@ -10,8 +10,9 @@ import jax.numpy as jnp
 
 from .. import quaternion as quat
 from .._fluid._flow import fluid_torque
-from .._fluid._fluid import Fluid, check_fluid, temperature_of
+from .._fluid._fluid import Fluid, check_fluid
 from .._inertia import body_inertia, check_inertia
+from .._integrate._bind import temperature
 from .._particles import PARTICLES, split_per_body, unwrap_per_body
 from .._state import RotState
 from .._validation import check_torque
@@ -67,10 +68,11 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         check_torque(torque)
         if fluid is not None and not isinstance(fluid, Fluid):
             raise ValueError(f"`fluid` must be None or a jaxrot.Fluid; got {type(fluid).__name__}.")
-        if fluid is not None and temperature_of(fluid.kT) != "zero":
+        # kT's value, or under jit what the Fluid recorded where it was built (as jaxrot.rollout reads it).
+        if fluid is not None and temperature(fluid) != "zero":
             raise ValueError(
-                "`fluid.kT` must be a concrete 0 for a RigidBodyTerm: its equations are deterministic (for a "
-                "fluid at a temperature use jaxrot.rollout with a `key`)."
+                "`fluid.kT` must be 0 for a RigidBodyTerm: its equations are deterministic (for a fluid at a "
+                "temperature use jaxrot.rollout with a `key`)."
             )
         inertia = jnp.asarray(inertia)
         if inertia.ndim not in (1, 2, 3) or inertia.shape[-1] != 3:
