@@ -221,3 +221,10 @@ def test_gradients_through_the_adaptive_solve_from_zero_angle_and_rate():
     for grad, difference in zip(grads, differences, strict=True):
         assert np.isfinite(float(grad))
         assert float(grad) == pytest.approx(float(difference), rel=1e-6)
+
+
+def test_an_exponential_solver_refuses_to_step_backwards_in_a_fluid():
+    """Backwards the friction's relaxation e^{+ζ|Δt|/I} grows without bound: an error when the program runs
+    (diffeqsolve traces the direction)."""
+    with pytest.raises(Exception, match=r"'exp_midpoint' in a fluid steps forward only"):
+        diffrax.diffeqsolve(TERM, jaxrot.solver("exp_midpoint"), 1.0, 0.0, -0.1, STATE, args=100.0)

@@ -75,20 +75,19 @@ class SchemeSolver(diffrax.AbstractSolver):
 
     def init(self, terms, t0, t1, y0, args):
         term, direction = _check_term(terms, y0)
-        t0 = self._check_fluid(term, direction, t0)
+        self._check_fluid(term)
         scheme = self.scheme
         t0 = t0 * direction
         return term.per_body(y0, args, lambda inertia, a, y: scheme.init(y, t0, inertia, term.torque, a), y0)
 
-    def _check_fluid(self, term, direction, t0):
-        """``t0``; a ValueError for a term this solver does not integrate."""
+    def _check_fluid(self, term):
+        """A ValueError for a term this solver does not integrate."""
         if term.fluid is not None:
             raise ValueError(
                 f"{self.scheme.name!r} integrates a body in vacuum, and `terms` has a `fluid`: use "
                 f"jaxrot.solver with a scheme of jaxrot.FLUID_SCHEMES ({_fluid_names()}), whose friction is "
                 "exact, or a diffrax solver (Kvaerno5 where the friction is stiff)."
             )
-        return t0
 
     def _carry(self, terms, t0, y0, args, solver_state, made_jump):
         """The solver state, rebuilt from ``y0`` after a jump (a stale reused torque or momentum)."""
@@ -220,15 +219,19 @@ class FluidSolver(SchemeSolver):
 
     scheme: AbstractExponentialLieRK
 
-    def _check_fluid(self, term, direction, t0):
+    def _check_fluid(self, term):
         if term.fluid is None:
             raise ValueError(
                 f"{self.scheme.name!r} integrates a body in a fluid: build the term with "
                 "jaxrot.RigidBodyTerm(inertia, torque, fluid=jaxrot.Fluid(friction))."
             )
-        # diffeqsolve traces the direction: the check runs with the program (an error at run time).
+
+    def init(self, terms, t0, t1, y0, args):
+        carry = super().init(terms, t0, t1, y0, args)
+        _, direction = _check_term(terms, y0)
+        # diffeqsolve traces the direction: the check runs with the program, on the carry every step reads.
         return eqx.error_if(
-            t0, direction != 1, f"{self.scheme.name!r} in a fluid steps forward only: t1 > t0."
+            carry, direction != 1, f"{self.scheme.name!r} in a fluid steps forward only: t1 > t0."
         )
 
 
