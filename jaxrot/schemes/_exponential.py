@@ -355,7 +355,8 @@ class AbstractExponentialLieRK(AbstractScheme):
             )
         args, fluid = args
         inertia = _diagonal(inertia)
-        (q0, omega0), slow0, forcing0 = carry
+        # By field, and `_replace` below: whatever else the carry holds passes through unchanged.
+        (q0, omega0), slow0, forcing0 = carry.state, carry.slow, carry.forcing
         z = -dt * fluid.friction * inertia.inverse
 
         def evaluate(t_i, q_i, deviation):
@@ -373,7 +374,7 @@ class AbstractExponentialLieRK(AbstractScheme):
         chart, _ = CHARTS[self.chart]
         q_hat = quat.normalize(quat.multiply(q0, chart(theta_hat)[0]))
         error = RotState(q1 - q_hat, quat.rotate(q1, deviation1 - deviation_hat))
-        return FluidCarry(RotState(q1, quat.rotate(q1, u1)), slow1, forcing1), error
+        return carry._replace(state=RotState(q1, quat.rotate(q1, u1)), slow=slow1, forcing=forcing1), error
 
     def _evaluate(self, t, q, inertia, torque, args, fluid, *, deviation=None, velocity=None):
         """``(S, N, u)`` of equation (1) at ``(t, q)`` and ``u = S + deviation`` (or ``velocity``)."""
