@@ -52,7 +52,10 @@ VACUUM = (
 FLUID = (
     "jaxrot/_fluid",
     "jaxrot/comparison/_fluid.py",
-    *(f"jaxrot/schemes/{name}.py" for name in "_exponential _phi _overdamped exp_midpoint exp_rk4".split()),
+    *(
+        f"jaxrot/schemes/{name}.py"
+        for name in "_exponential _phi _overdamped exp_midpoint exp_rk4 exp_rk5".split()
+    ),
 )
 THERMAL = (
     *ROTOR,

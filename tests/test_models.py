@@ -55,7 +55,7 @@ def nothing_compiles(monkeypatch):
 
 
 def test_each_name_is_one_scheme_and_the_views_agree_with_schemes_for():
-    assert len(REGISTRY) == 18  # 10 in vacuum, 2 in a fluid, 2 thermal, 2 more overdamped, 2 Brownian
+    assert len(REGISTRY) == 19  # 10 in vacuum, 3 in a fluid, 2 thermal, 2 more overdamped, 2 Brownian
     # The thermal (Brownian) schemes run the fluid (overdamped) call at kT = 0, so they list it.
     assert {"baoab", "exp_euler"} <= set(jaxrot.FLUID_SCHEMES)
     assert {"brownian_euler", "brownian_splitting"} <= set(jaxrot.OVERDAMPED_SCHEMES)

@@ -10,6 +10,7 @@ size controllers, `SaveAt`, events, adjoints. Only diffrax's public API is used
 from typing import Any, ClassVar
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax import lax
@@ -17,7 +18,7 @@ from jax import lax
 from .. import quaternion as quat
 from .._integrate._bind import INERTIAL, scheme_for_call
 from .._state import RotState
-from ..schemes import AbstractLieRungeKutta, AbstractScheme
+from ..schemes import FLUID_SCHEMES, AbstractExponentialLieRK, AbstractLieRungeKutta, AbstractScheme
 from ..schemes._base import world_torque
 from ..schemes._lie_runge_kutta import _combination, _momentum, exp_and_dexpinv
 from ._interpolation import hermite_interpolation, stage_interpolation
@@ -74,9 +75,19 @@ class SchemeSolver(diffrax.AbstractSolver):
 
     def init(self, terms, t0, t1, y0, args):
         term, direction = _check_term(terms, y0)
+        self._check_fluid(term)
         scheme = self.scheme
         t0 = t0 * direction
         return term.per_body(y0, args, lambda inertia, a, y: scheme.init(y, t0, inertia, term.torque, a), y0)
+
+    def _check_fluid(self, term):
+        """A ValueError for a term this solver does not integrate."""
+        if term.fluid is not None:
+            raise ValueError(
+                f"{self.scheme.name!r} integrates a body in vacuum, and `terms` has a `fluid`: use "
+                f"jaxrot.solver with a scheme of jaxrot.FLUID_SCHEMES ({_fluid_names()}), whose friction is "
+                "exact, or a diffrax solver (Kvaerno5 where the friction is stiff)."
+            )
 
     def _carry(self, terms, t0, y0, args, solver_state, made_jump):
         """The solver state, rebuilt from ``y0`` after a jump (a stale reused torque or momentum)."""
@@ -196,6 +207,60 @@ class AdaptiveLieSolver(SchemeSolver, diffrax.AbstractAdaptiveSolver):
         return y1, error, info, (new, last), diffrax.RESULTS.successful
 
 
+class FluidSolver(SchemeSolver):
+    """An exponential scheme (`jaxrot.FLUID_SCHEMES`) as a fixed-step diffrax solver, for a
+    `jaxrot.RigidBodyTerm` with a ``fluid`` (use `jaxrot.solver` to build one).
+
+    Its step is the scheme's ``in_fluid()`` step (the friction's relaxation exact at any ``ζΔt/I``)
+    without `jaxrot.rollout`'s graded start: a body started off its slow manifold relaxes within
+    ``I/ζ``, which a fixed ``dt0`` above that does not resolve (the adaptive `AdaptiveFluidSolver`
+    shrinks its steps there itself). Forward in time only (``t1 > t0``): backwards, the friction's
+    relaxation ``e^{+ζ|Δt|/I}`` grows without bound."""
+
+    scheme: AbstractExponentialLieRK
+
+    def _check_fluid(self, term):
+        if term.fluid is None:
+            raise ValueError(
+                f"{self.scheme.name!r} integrates a body in a fluid: build the term with "
+                "jaxrot.RigidBodyTerm(inertia, torque, fluid=jaxrot.Fluid(friction))."
+            )
+
+    def init(self, terms, t0, t1, y0, args):
+        carry = super().init(terms, t0, t1, y0, args)
+        _, direction = _check_term(terms, y0)
+        # diffeqsolve traces the direction: the check runs with the program, on the carry every step reads.
+        return eqx.error_if(
+            carry, direction != 1, f"{self.scheme.name!r} in a fluid steps forward only: t1 > t0."
+        )
+
+
+class AdaptiveFluidSolver(FluidSolver, diffrax.AbstractAdaptiveSolver):
+    """An exponential scheme with embedded weights (``"exp_rk5"``) as an adaptive diffrax solver in a fluid.
+
+    Works with `diffrax.PIDController`. ``y_error`` is the scheme's `step_with_error`: the
+    difference of the method and its embedded method of lower order in ``q`` and in the deviation
+    ``ω − R S`` from the slow velocity, at no extra torque call; the controller's ``error_order``
+    is diffrax's default for a pair of orders ``p``, ``p − 1`` (``p``). Dense output as `SchemeSolver`'s."""
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        term, direction = _check_term(terms, y0)
+        scheme = self.scheme
+        carry = self._carry(terms, t0, y0, args, solver_state, made_jump)
+        t0, dt = t0 * direction, (t1 - t0) * direction
+
+        def one(inertia, a, c):
+            return scheme.step_with_error(c, t0, dt, inertia, term.torque, a)
+
+        new, error = term.per_body(y0, args, one, carry)
+        y1 = _batched(y0, scheme.state, new)
+        return y1, error, self._hermite_info(term, y0, y1, dt, args), new, diffrax.RESULTS.successful
+
+
+def _fluid_names():
+    return ", ".join(repr(n) for n, s in FLUID_SCHEMES.items() if isinstance(s, AbstractExponentialLieRK))
+
+
 def _matrix(inverse):
     return jnp.diag(inverse) if inverse.ndim == 1 else inverse
 
@@ -209,6 +274,11 @@ def solver(scheme: Any) -> SchemeSolver:
     fixed-step solver for `diffrax.ConstantStepSize` or `diffrax.StepTo`, whose
     constant-step result equals `jaxrot.rollout`'s. ``y`` is a `jaxrot.RotState`; ``q``
     stays unit to round-off at every step and in the dense output.
+
+    In a fluid (a `jaxrot.RigidBodyTerm` with ``fluid=``): the exponential schemes
+    (``"exp_midpoint"``, ``"exp_rk4"``: `FluidSolver`, fixed step; ``"exp_rk5"``, which has an
+    embedded estimate: `AdaptiveFluidSolver`, for `diffrax.PIDController`), whose friction is exact
+    at any ``ζΔt/I``. The other schemes refuse a term with a fluid.
 
     Gradients: `diffrax.RecursiveCheckpointAdjoint` (the default) and
     `diffrax.DirectAdjoint` differentiate through the steps. `diffrax.BacksolveAdjoint`
@@ -231,6 +301,11 @@ def solver(scheme: Any) -> SchemeSolver:
         >>> bool(jnp.allclose(jnp.linalg.norm(sol.ys.q, axis=-1), 1, atol=1e-14, rtol=0))
         True
     """
+    if isinstance(scheme, str) and scheme in FLUID_SCHEMES:
+        scheme = FLUID_SCHEMES[scheme]
+    if isinstance(scheme, AbstractExponentialLieRK):  # a body in a fluid: a RigidBodyTerm with `fluid`
+        scheme = scheme.in_fluid()
+        return AdaptiveFluidSolver(scheme) if scheme.has_error_estimate else FluidSolver(scheme)
     scheme, _ = scheme_for_call(scheme, INERTIAL)  # a body in vacuum: the model a RigidBodyTerm is
     if isinstance(scheme, AbstractLieRungeKutta) and scheme.has_error_estimate and scheme.dense_output:
         return AdaptiveLieSolver(scheme)

@@ -9,11 +9,15 @@ import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
+from .._fluid._flow import fluid_torque
+from .._fluid._fluid import Fluid, check_fluid
 from .._inertia import body_inertia, check_inertia
+from .._integrate._bind import temperature
 from .._particles import PARTICLES, split_per_body, unwrap_per_body
 from .._state import RotState
 from .._validation import check_torque
-from ..schemes._base import body_torque
+from ..schemes._base import body_torque, world_torque
+from ..schemes._exponential import FluidArgs
 
 
 class RigidBodyTerm(diffrax.AbstractTerm):
@@ -39,6 +43,11 @@ class RigidBodyTerm(diffrax.AbstractTerm):
             all bodies, or ``(N, 3)``/``(N, 3, 3)`` one per body.
         torque: ``torque(t, q, omega, args) -> (3,)`` world-frame torque on one
             body, or None for a torque-free body.
+        fluid: a `jaxrot.Fluid` at ``kT = 0`` (keyword), or None: its torque is added to
+            ``torque`` (as `jaxrot.rollout`'s ``fluid=``), so diffrax's solvers integrate it as a plain
+            torque and `jaxrot.solver` of an exponential scheme (``"exp_rk5"``, adaptive) takes its
+            friction exactly. The inertia must then be principal moments ``(3,)`` (or ``(N, 3)``) about
+            the friction's axes.
 
     Example:
         >>> import diffrax, jax.numpy as jnp, jaxrot
@@ -51,9 +60,20 @@ class RigidBodyTerm(diffrax.AbstractTerm):
 
     inertia: jax.Array
     torque: Callable[..., jax.Array] | None = eqx.field(static=True)
+    fluid: Fluid | None = None
 
-    def __init__(self, inertia, torque: Callable[..., jax.Array] | None = None):
+    def __init__(
+        self, inertia, torque: Callable[..., jax.Array] | None = None, *, fluid: Fluid | None = None
+    ):
         check_torque(torque)
+        if fluid is not None and not isinstance(fluid, Fluid):
+            raise ValueError(f"`fluid` must be None or a jaxrot.Fluid; got {type(fluid).__name__}.")
+        # kT's value, or under jit what the Fluid recorded where it was built (as jaxrot.rollout reads it).
+        if fluid is not None and temperature(fluid) != "zero":
+            raise ValueError(
+                "`fluid.kT` must be 0 for a RigidBodyTerm: its equations are deterministic (for a fluid at a "
+                "temperature use jaxrot.rollout with a `key`)."
+            )
         inertia = jnp.asarray(inertia)
         if inertia.ndim not in (1, 2, 3) or inertia.shape[-1] != 3:
             raise ValueError(
@@ -62,6 +82,7 @@ class RigidBodyTerm(diffrax.AbstractTerm):
             )
         self.inertia = inertia
         self.torque = torque
+        self.fluid = fluid
 
     def per_body(self, y: RotState, args, fn: Callable[..., Any], *arrays):
         """``fn(inertia, args, *arrays)`` for one body, vmapped when ``y`` holds ``N`` bodies.
@@ -69,7 +90,8 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         ``inertia`` is the body's `jaxrot.BodyInertia` and ``args`` its torque arguments
         (its row of every `jaxrot.per_body` leaf); ``arrays`` have the bodies as their
         leading axis when ``y`` does. The vmap axis is named ``"particles"``, so coupled
-        torques of `jaxrot.torques` see the other bodies."""
+        torques of `jaxrot.torques` see the other bodies. With a ``fluid``, ``args`` is a `FluidArgs`:
+        the torque's own and the body's fluid values (`jaxrot._fluid._fluid.check_fluid`)."""
         if not isinstance(y, RotState):
             raise ValueError(
                 f"a RigidBodyTerm's state `y0` must be a jaxrot.RotState(q, omega) (world omega); "
@@ -82,9 +104,16 @@ class RigidBodyTerm(diffrax.AbstractTerm):
             )
         batch_shape = y.q.shape[:-1]
         inertia, per_particle = check_inertia(self.inertia, batch_shape, y.q.dtype, runtime=False)
+        if self.fluid is not None:
+            fluid_values, fluid_axes = check_fluid(self.fluid, batch_shape, y.q.dtype)
         if not batch_shape:
-            return fn(body_inertia(inertia), unwrap_per_body(args), *arrays)
+            args = unwrap_per_body(args)
+            return fn(
+                body_inertia(inertia), args if self.fluid is None else FluidArgs(args, fluid_values), *arrays
+            )
         args_values, args_axes = split_per_body(args, batch_shape)
+        if self.fluid is not None:
+            args_values, args_axes = FluidArgs(args_values, fluid_values), FluidArgs(args_axes, fluid_axes)
 
         def one(inert, a, *xs):
             return fn(body_inertia(inert), a, *xs)
@@ -99,7 +128,14 @@ class RigidBodyTerm(diffrax.AbstractTerm):
     def _vector_field(self, inertia, args, t, y: RotState) -> RotState:
         q_unit = quat.normalize(y.q)
         omega_body = quat.rotate(quat.conjugate(q_unit), y.omega)
-        tau_body = body_torque(self.torque, t, q_unit, y.omega, args)
+        if self.fluid is None:
+            tau_body = body_torque(self.torque, t, q_unit, y.omega, args)
+        else:
+            args, fluid = args
+            tau = fluid_torque(q_unit, y.omega, fluid)
+            if self.torque is not None:
+                tau = tau + world_torque(self.torque, t, q_unit, y.omega, args)
+            tau_body = quat.rotate(quat.conjugate(q_unit), tau)
         q_dot = 0.5 * quat.multiply(quat.pure(y.omega), y.q)
         return RotState(q_dot, quat.rotate(q_unit, inertia.angular_acceleration(omega_body, tau_body)))
 

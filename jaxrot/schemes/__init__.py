@@ -44,6 +44,7 @@ from .euler import Euler as Euler
 from .exp_euler import ExpEuler as ExpEuler
 from .exp_midpoint import ExpMidpoint as ExpMidpoint
 from .exp_rk4 import ExpRK4 as ExpRK4
+from .exp_rk5 import ExpRK5 as ExpRK5
 from .no_squish import NoSquish as NoSquish, NoSquishCarry as NoSquishCarry
 from .rkmk4 import RKMK4 as RKMK4
 from .rkmk_dopri5 import RKMKDopri5 as RKMKDopri5
@@ -95,6 +96,7 @@ REGISTRY = _register(
     SRKN14a(),
     ExpMidpoint(),
     ExpRK4(),
+    ExpRK5(),
     BAOAB(),
     ExpEuler(),
     BrownianEuler(),

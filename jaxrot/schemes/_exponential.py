@@ -94,11 +94,14 @@ class ExponentialTableau(NamedTuple):
         a: for each of stages 2, …, s, ``{j: terms}``: ``a_ij(z) = Σ coefficient · φ_k(node · z)``
             over its terms ``(coefficient, k, node)`` (``j`` counts stages from 0).
         b: ``{j: terms}``, the weights of the step.
+        b_embedded: ``{j: terms}``, the weights of an embedded method of lower order on the same
+            stages (its difference from ``b`` is the step's error estimate), or None.
     """
 
     c: tuple[float, ...]
     a: tuple[dict[int, tuple[Term, ...]], ...]
     b: dict[int, tuple[Term, ...]]
+    b_embedded: dict[int, tuple[Term, ...]] | None = None
 
     @property
     def num_stages(self) -> int:
@@ -108,13 +111,18 @@ class ExponentialTableau(NamedTuple):
         """``(node, row)`` of stages 2, …, s, then ``(1.0, b)``."""
         return [*zip(self.c, self.a, strict=True), (1.0, self.b)]
 
+    def embedded(self) -> "ExponentialTableau":
+        """The embedded weights as a tableau of one row (`_weights` of it: the embedded step's weights)."""
+        return ExponentialTableau(c=(), a=(), b=self.b_embedded)
+
     def k_max(self) -> int:
         """The highest φ-function the ``Θ``-rows need (one above the highest term)."""
         return 1 + max(k for _, row in self.rows() for terms in row.values() for _, k, _ in terms)
 
     def check(self):
-        """``Σ_j a_ij(z) = c_i φ_1(c_i z)`` and ``Σ_j b_j(z) = φ_1(z)`` at a few ``z`` (float64)."""
-        for node, row in self.rows():
+        """``Σ_j a_ij(z) = c_i φ_1(c_i z)``, ``Σ_j b_j(z) = φ_1(z)`` (and ``b_embedded``) at a few ``z``."""
+        embedded = [] if self.b_embedded is None else [(1.0, self.b_embedded)]
+        for node, row in self.rows() + embedded:
             for z in (0.0, -0.3, -4.0, -60.0):
                 total = sum(_term_value(t, z) for terms in row.values() for t in terms)
                 expected = node * float(phi_functions(np.float64(node * z), 1, np)[1])
@@ -291,9 +299,10 @@ class AbstractExponentialLieRK(AbstractScheme):
         state1 = RotState(q1, quat.rotate(q1, u1))
         return FluidCarry(state1, slow1, forcing1) if self.fluid else state1
 
-    def _advance(self, q0, deviation0, forcing0, slow0, t, h, z, evaluate):
+    def _advance(self, q0, deviation0, forcing0, slow0, t, h, z, evaluate, stages=False):
         """One step of the stages in the module's docstring: ``(q1, u1, S1, N1)`` (``S1``, ``N1`` at the
-        end point: the next step's first stage)."""
+        end point: the next step's first stage); with ``stages``, also ``(Θ1, V1, [N_j], [K_j − V_j])``
+        for `step_with_error`'s embedded combination."""
         chart, inverse_differential = CHARTS[self.chart]
         forcings = [forcing0]
         # K_1 − V_1 = S_1: Θ_1 = 0, where dexp⁻¹ is the identity.
@@ -320,10 +329,52 @@ class AbstractExponentialLieRK(AbstractScheme):
                 q_i = quat.normalize(q_i)
             slow, forcing, u = stage(*evaluate(t + node * h, q_i, deviation))
             if last:
+                if stages:
+                    return q_i, u, slow, forcing, (theta, deviation, forcings, rotation_terms)
                 return q_i, u, slow, forcing
             forcings.append(forcing)
             # Right-trivialised: Θ̇ = dψ⁻¹_{−Θ}(u) for q = q_n ⊗ ψ(Θ).
             rotation_terms.append(stage(inverse_differential(-theta, chart_scalar, u) - deviation))
+
+    @property
+    def has_error_estimate(self) -> bool:
+        """Whether the tableau has embedded weights: `step_with_error` (in a fluid) then applies."""
+        return self.tableau.b_embedded is not None
+
+    def step_with_error(self, carry, t, dt, inertia, torque, args):
+        """A step in a fluid and its error estimate: ``(carry, RotState(q1 − q̂1, R1 (V1 − V̂1)))``.
+
+        ``q̂1 = q_n ⊗ ψ(Θ̂1)`` and ``V̂1`` are the embedded row (``b_embedded``) of the same stages, so
+        the estimate costs no torque call: the error of the lower-order method in the orientation and in
+        the deviation ``v = ω_b − S`` (rotated to the world frame), the two variables the scheme
+        integrates (``S`` is a function of ``(t, q)``, whose error follows ``q``'s). ``args`` a
+        `FluidArgs`, ``carry`` a `FluidCarry`: only `in_fluid`'s form has an estimate."""
+        if not (self.fluid and self.has_error_estimate):
+            raise ValueError(
+                f"{self.name!r} has no error estimate here: it needs embedded weights and `in_fluid()`."
+            )
+        args, fluid = args
+        inertia = _diagonal(inertia)
+        # By field, and `_replace` below: whatever else the carry holds passes through unchanged.
+        (q0, omega0), slow0, forcing0 = carry.state, carry.slow, carry.forcing
+        z = -dt * fluid.friction * inertia.inverse
+
+        def evaluate(t_i, q_i, deviation):
+            return self._evaluate(t_i, q_i, inertia, torque, args, fluid, deviation=deviation)
+
+        deviation0 = quat.rotate(quat.conjugate(q0), omega0) - slow0
+        q1, u1, slow1, forcing1, (_, deviation1, forcings, rotation_terms) = self._advance(
+            q0, deviation0, forcing0, slow0, t, dt, z, evaluate, stages=True
+        )
+        # The embedded row, as `_advance` combines a row (the same arithmetic, without an evaluation).
+        ((decay, transient, a, a_int, a_zero),) = _weights(self.tableau.embedded(), z)
+        deviation_hat = decay * deviation0 + dt * _sum(a, forcings)
+        theta_hat = (dt * transient) * deviation0 + dt * dt * _sum(a_int, forcings)
+        theta_hat = theta_hat + dt * _sum(a_zero, rotation_terms)
+        chart, _ = CHARTS[self.chart]
+        q_hat = quat.normalize(quat.multiply(q0, chart(theta_hat)[0]))
+        error = RotState(q1 - q_hat, quat.rotate(q1, deviation1 - deviation_hat))
+        return carry._replace(state=RotState(q1, quat.rotate(q1, u1)), slow=slow1, forcing=forcing1), error
 
     def _evaluate(self, t, q, inertia, torque, args, fluid, *, deviation=None, velocity=None):
         """``(S, N, u)`` of equation (1) at ``(t, q)`` and ``u = S + deviation`` (or ``velocity``)."""
