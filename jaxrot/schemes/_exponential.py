@@ -229,7 +229,8 @@ class AbstractExponentialLieRK(AbstractScheme):
     def _rates(self, inertia, args):
         """``(L_min, L_max)`` over the batch: ``L = ζ/I`` per body axis, reduced with `eqxi.unvmap_max`
         so that one substep schedule serves every body of a vmapped batch."""
-        rate = args.fluid.friction * _diagonal(inertia).inverse
+        # The schedule is a discretisation, like dt: not differentiated (unvmap_max has no JVP rule).
+        rate = jax.lax.stop_gradient(args.fluid.friction * _diagonal(inertia).inverse)
         return -eqxi.unvmap_max(-jnp.min(rate)), eqxi.unvmap_max(jnp.max(rate))
 
     def _first_substep(self, dt, rate_max):
