@@ -243,9 +243,8 @@ class AbstractExponentialLieRK(AbstractScheme):
         dtype = carry.state.q.dtype
         dt = jnp.asarray(dt, dtype)
         elapsed = jnp.asarray(t - t0, dtype)
-        growing = (self._first_substep(dt, rate_max) * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed) < dt) & (
-            elapsed * rate_min < _LAYER_DECAYED
-        )
+        substep = self._first_substep(dt, rate_max) * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
+        growing = (substep < dt) & (elapsed * rate_min < _LAYER_DECAYED)
         return growing & eqxi.unvmap_any(carry.layer)
 
     def _off_manifold(self, carry, rate):
@@ -273,7 +272,8 @@ class AbstractExponentialLieRK(AbstractScheme):
             size = first * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
             # Once e^{-L_min (t - t0)} is below float64's resolution, nothing is left to resolve; the
             # loop's last substep takes what is left of the step.
-            last = (size >= dt - offset) | (elapsed * rate_min >= _LAYER_DECAYED) | (count == _MAX_SUBSTEPS - 1)
+            decayed = elapsed * rate_min >= _LAYER_DECAYED
+            last = (size >= dt - offset) | decayed | (count == _MAX_SUBSTEPS - 1)
             size = jnp.where(last, dt - offset, size)
             return last, count + 1, offset + size, self.step(carry, t + offset, size, inertia, torque, args)
 
