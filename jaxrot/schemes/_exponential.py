@@ -36,18 +36,8 @@ tableau dropped to order 3 for ``hL ≫ 1``, as it did when an ω-independent to
 ``N`` as ``I⁻¹ τ``. As ``hL → ∞`` the scheme tends to the tableau's classical method (``z = 0``)
 applied to the overdamped model ``q̇ = ½ q ⊗ (0, S)``.
 
-The start of a run: a body started off the slow manifold (at rest in a shear or a field, say)
-relaxes within ``I/ζ``, and while it does ``N`` varies on that time scale, not on the step's: the
-stiff orders assume a smooth ``N`` and fail there (measured on a dipole in a rotating field at
-``ζ/I = 1000`` started at rest: the error fell at order 1.2–1.5 over ``hL`` from 60 to 8, with a
-plateau near 1e-6 rad). So the first `GRADED_STEPS` steps of a run are taken in substeps that grow
-from ``1/(16 L_max)`` by ``α = 0.15`` times the time since the start (a graded mesh over the
-layer: ``s = 1/(16 L_max) + α (t − t_0)``, the last one cut to end on the step), after which a
-substep is the step (or sooner, once ``e^{−L_min (t − t_0)}`` is below 2e-16): with it the same
-probe keeps order 4 from ``hL = 500`` down to 4 and levels at about 4e-12 rad below
-(`benchmarks/fluid_layer.py`, docs/fluid_layer.json). It costs
-``(1/α) ln(1 + 16 α hL)`` substeps once per run (about 60 at ``hL = 500``, 150 at ``1e8``);
-``graded_start=False`` turns it off for a run that starts on the slow manifold.
+The start of a run off the slow manifold (a boundary layer of width ``I/ζ``) is taken in graded
+substeps: `jaxrot.schemes._graded_start` has the mesh, the decision and their measurements.
 
 Without a fluid (``L = 0``, ``S = 0``) every ``φ_k`` is ``1/k!`` and the scheme is the tableau's
 classical Runge–Kutta method on ``(q, ω_b)``.
@@ -58,7 +48,6 @@ import math
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
-import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -68,21 +57,11 @@ from .._core._fusion import stage
 from .._fluid._flow import body_flow
 from .._inertia import body_inertia
 from .._state import RotState
+from . import _graded_start
 from ._base import AbstractScheme, world_torque
 from ._lie_runge_kutta import CHARTS, add_terms
 from ._phi import phi_functions
 from ._rkn_splitting import uses_omega
-
-
-# The graded start (module docstring): the first substep min(r h, σ / L_max), each next one e^{L_min s / 5}
-# times the last (a geometric mesh over the layer, in proportion to the step while hL < σ / r); on while
-# the layer's deviation from the manifold exceeds κ times the manifold's own offset N/L.
-_STEP_FRACTION = 1 / 3  # r
-_LAYER_RESOLUTION = 1 / 16  # σ
-_GROWTH_EXPONENT = 1 / 5  # the cost-optimal grading for a local error ∝ s⁵ e^{−L t}
-_LAYER_TOLERANCE = 0.5  # κ
-_MAX_SUBSTEPS = 256
-_LAYER_DECAYED = 36.0  # e^-36 = 2e-16
 
 
 Term = tuple[float, int, float]  # (coefficient, k, node): coefficient · φ_k(node · z)
@@ -226,59 +205,17 @@ class AbstractExponentialLieRK(AbstractScheme):
     def start_steps(self) -> int:
         return 1 if self.fluid and self.graded_start else 0
 
-    def _rates(self, inertia, args):
-        """``(L_min, L_max)`` over the batch: ``L = ζ/I`` per body axis, reduced with `eqxi.unvmap_max`
-        so that one substep schedule serves every body of a vmapped batch."""
-        # The schedule is a discretisation, like dt: not differentiated (unvmap_max has no JVP rule).
-        rate = jax.lax.stop_gradient(args.fluid.friction * _diagonal(inertia).inverse)
-        return -eqxi.unvmap_max(-jnp.min(rate)), eqxi.unvmap_max(jnp.max(rate))
-
-    def _first_substep(self, dt, rate_max):
-        return jnp.minimum(_STEP_FRACTION * dt, _LAYER_RESOLUTION / rate_max)
-
     def starting(self, carry, index, t, t0, dt, inertia, args):
-        """Whether the step at ``t`` is graded: the layer's schedule has not yet reached ``dt`` and
-        some body of the batch is off its slow manifold (the module's docstring)."""
-        rate_min, rate_max = self._rates(inertia, args)
-        dtype = carry.state.q.dtype
-        dt = jnp.asarray(dt, dtype)
-        elapsed = jnp.asarray(t - t0, dtype)
-        substep = self._first_substep(dt, rate_max) * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
-        growing = (substep < dt) & (elapsed * rate_min < _LAYER_DECAYED)
-        return growing & eqxi.unvmap_any(carry.layer)
-
-    def _off_manifold(self, carry, rate):
-        """``|v − N/L|_∞ > κ |N/L|_∞`` (plus round-off): the body is in a boundary layer."""
-        (q, omega), slow, forcing, _ = carry
-        manifold = forcing / rate
-        layer = quat.rotate(quat.conjugate(q), omega) - slow - manifold
-        eps = jnp.finfo(q.dtype).eps
-        noise = 64 * eps * (jnp.abs(slow).max() + jnp.abs(omega).max())
-        return jnp.abs(layer).max() > _LAYER_TOLERANCE * jnp.abs(manifold).max() + noise
+        """Whether the step at ``t`` is graded (`jaxrot.schemes._graded_start.starting`)."""
+        return _graded_start.starting(carry, t, t0, dt, _rates(inertia, args))
 
     def start_step(self, carry, t, dt, t0, inertia, torque, args):
-        """A step of the start, in graded substeps (the module's docstring; in a fluid only)."""
-        rate_min, rate_max = self._rates(inertia, args)
-        dt = jnp.asarray(dt, carry.state.q.dtype)
-        first = self._first_substep(dt, rate_max)
+        """A step of the start, in graded substeps (`jaxrot.schemes._graded_start`; in a fluid only)."""
 
-        def unfinished(loop):
-            done, _, _, _ = loop
-            return ~done
+        def step(carry, t, size):
+            return self.step(carry, t, size, inertia, torque, args)
 
-        def substep(loop):
-            _, count, offset, carry = loop
-            elapsed = (t - t0) + offset
-            size = first * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
-            # Once e^{-L_min (t - t0)} is below float64's resolution, nothing is left to resolve; the
-            # loop's last substep takes what is left of the step.
-            decayed = elapsed * rate_min >= _LAYER_DECAYED
-            last = (size >= dt - offset) | decayed | (count == _MAX_SUBSTEPS - 1)
-            size = jnp.where(last, dt - offset, size)
-            return last, count + 1, offset + size, self.step(carry, t + offset, size, inertia, torque, args)
-
-        start = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), jnp.zeros_like(dt), carry)
-        return eqxi.while_loop(unfinished, substep, start, max_steps=_MAX_SUBSTEPS, kind="bounded")[3]
+        return _graded_start.graded_step(step, carry, t, dt, t0, _rates(inertia, args))
 
     def state(self, carry):
         return carry.state if self.fluid else carry
@@ -299,7 +236,7 @@ class AbstractExponentialLieRK(AbstractScheme):
         carry = FluidCarry(RotState(q, omega), slow, forcing)
         if not self.graded_start:
             return carry
-        return carry._replace(layer=self._off_manifold(carry, fluid.friction * inertia.inverse))
+        return carry._replace(layer=_graded_start.off_manifold(carry, fluid.friction * inertia.inverse))
 
     def step(self, carry, t, dt, inertia, torque, args):
         if self.fluid:
@@ -400,6 +337,11 @@ def _plain_forcing(t, q, u, inertia, torque, args):
     if torque is not None:
         tau_b = quat.rotate(quat.conjugate(q), world_torque(torque, t, q, quat.rotate(q, u), args))
     return inertia.angular_acceleration(u, tau_b)
+
+
+def _rates(inertia, args):
+    """``L = ζ/I`` ``(3,)`` of one body (principal moments about the friction's axes)."""
+    return args.fluid.friction * _diagonal(inertia).inverse
 
 
 def _diagonal(inertia):
