@@ -51,7 +51,8 @@ _STEP_FRACTION = 1 / 3  # r
 _LAYER_RESOLUTION = 1 / 16  # σ
 _GROWTH_EXPONENT = 1 / 5  # the cost-optimal grading for a local error ∝ s⁵ e^{−L t}
 _LAYER_TOLERANCE = 0.5  # κ
-_MAX_SUBSTEPS = 256
+_MAX_SUBSTEPS = 1024
+_SLOW_FRACTION = 1.0  # c
 _LAYER_DECAYED = 36.0  # e^-36 = 2e-16
 
 
@@ -62,8 +63,14 @@ def _rates(rate):
     return jnp.min(rate), jnp.max(rate)
 
 
-def _first_substep(dt, rate_max):
-    return jnp.minimum(_STEP_FRACTION * dt, _LAYER_RESOLUTION / rate_max)
+def _first_substep(carry, dt, rate_min, rate_max):
+    """``h min(r, c ω/L_max)``: in proportion to the step at every ``L`` (no kink in ``h``); ``ω``
+    the slow motion's rate, ``|S| + |N|^{1/2}``. Floored where the geometric mesh,
+    ``5 L_max/(L_min L_max s₀)`` substeps, would not fit the loop's cap (with room for its tail)."""
+    omega = jnp.linalg.norm(carry.slow) + jnp.sqrt(jnp.linalg.norm(carry.forcing))
+    floor = (1 / _GROWTH_EXPONENT) * (rate_max / rate_min) / (_MAX_SUBSTEPS - 64)
+    fraction = jnp.maximum(_SLOW_FRACTION * omega / rate_max, floor / (dt * rate_max))
+    return dt * jnp.minimum(_STEP_FRACTION, fraction)
 
 
 def off_manifold(carry, rate):
@@ -83,7 +90,7 @@ def _graded(carry, t, t0, dt, rate):
     dtype = carry.state.q.dtype
     dt = jnp.asarray(dt, dtype)
     elapsed = jnp.asarray(t - t0, dtype)
-    substep = _first_substep(dt, rate_max) * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
+    substep = _first_substep(carry, dt, rate_min, rate_max) * jnp.exp(_GROWTH_EXPONENT * rate_min * elapsed)
     return carry.layer & (substep < dt) & (elapsed * rate_min < _LAYER_DECAYED)
 
 
@@ -98,7 +105,7 @@ def graded_step(step, carry, t, dt, t0, rate):
     substep, the step, for a body whose own schedule is done: its result is its run alone's)."""
     rate_min, rate_max = _rates(rate)
     dt = jnp.asarray(dt, carry.state.q.dtype)
-    first = jnp.where(_graded(carry, t, t0, dt, rate), _first_substep(dt, rate_max), dt)
+    first = jnp.where(_graded(carry, t, t0, dt, rate), _first_substep(carry, dt, rate_min, rate_max), dt)
 
     def unfinished(loop):
         done, _, _, _ = loop
