@@ -1,40 +1,44 @@
 """The exponential schemes' graded start: a run that begins in a boundary layer, without an error floor.
 
-The start of a run: a body started off the slow manifold (at rest in a shear or a field, say)
-relaxes within ``I/ζ``, and while it does ``N`` varies on that time scale, not on the step's: the
-stiff orders assume a smooth ``N`` and fail there (measured on a dipole in a rotating field at
-``ζ/I = 1000`` started at rest: the error fell at order 1.2–1.5 over ``hL`` from 60 to 8). So a run
-that starts in such a layer takes its first steps in substeps of a graded mesh. Model: the layer's
-part of ``N`` is ``B e^{−Lτ}``; a substep ``s`` at ``τ`` into it errs by ``∝ B s (sL)⁴ e^{−Lτ}``
-(``sL ≲ 3``; by ``∝ B s e^{−Lτ}`` beyond, measured: linear in ``h`` at ``hL`` 400–3000). The mesh
-with the fewest substeps for a given sum of these is geometric, ``s(τ) = s₀ e^{Lτ/5}``, and sums
-to ``≈ 5 (L s₀)⁴ B/L²``. So the substeps are ``s₀ e^{L_min (t − t₀)/5}`` (capped at the step), from
+A body started off its slow manifold (at rest in a shear or a field, spinning, or at the slow
+velocity ``S``) relaxes within ``1/L`` (``L = ζ/I``), and while it does the forcing ``N`` of
+`jaxrot.schemes._exponential`'s equation (1) varies on that time scale, not the step's: the stiff
+orders assume a smooth ``N`` and fail there (a dipole in a rotating field at ``ζ/I = 1000`` from rest:
+order 1.2–1.5 over ``hL`` from 60 to 8). So a run that starts in a layer takes its first steps in
+substeps.
 
-    s₀ = min(h/3, 1/(16 L_max)):
+The mesh. Model: the layer's part of ``N`` is ``B e^{−Lτ}``; a substep ``s`` at ``τ`` into it errs
+by ``∝ B s (sL)⁴ e^{−Lτ}`` for ``sL ≲ 3`` (by ``∝ B s e^{−Lτ}`` beyond: the plain start's error
+measured linear in ``h`` at ``hL`` 400–3000). The mesh with the fewest substeps for a given sum is
+geometric, ``s(τ) = s₀ e^{Lτ/5}``, and that sum is ``≈ 5 (L s₀)⁴ B/L²``. For the start's error to
+fall at order 4 as ``h`` falls at a fixed ``L`` the whole mesh must scale with ``h``: so
 
-while ``hL_max < 3/16`` the mesh is a fixed fraction of the step and the layer's error a fixed
-fraction (≈ 5/3⁴) of the plain start's, which is ``O(h⁴)``: no floor as ``h → 0`` (the earlier
-mesh, ``1/(16 L) + 0.15 (t − t₀)``, did not shrink with ``h``: its error stopped falling where the
-plain start's caught up with it, local order 1.3 at ``ζ/I = 10``). Above, ``s₀ = 1/(16 L_max)`` and
-the layer's error is ``≈ 5 · 16⁻⁴`` of its unresolved size ``B/L²``, which falls as ``1/L²`` and
-is below the smooth steps' error on the probes (`tests/test_fluid_start.py`: slopes 3.9–4.2 over a
-16-fold range of ``h`` at ``ζ/I`` 10, 1e3, 1e5, from rest, spinning and on the manifold; spinning
-at ``ζ/I = 10`` the fixed part shows: slope 3.56). The start runs while ``s₀ e^{L_min (t − t₀)/5}
-< h`` (and ``e^{−L_min (t − t₀)}`` above 2e-16): about ``80 L_max/L_min`` substeps when
-``hL ≫ 1``, whatever ``hL``; ``(15 − 5 ln 3)/(h L_min) ≈ 9.5/(h L_min)`` steps' worth more than
-plain steps when ``hL ≪ 1`` (24 % of a run of ``ζ/I = 10`` over ``t = 4``; 0.2 % at 1e3).
+    s₀ = h · min(1/3, ω/L_max),     ω = |S| + |N|^{1/2}     (the slow motion's rate),
 
-Whether to start is decided once, at `init`, per batch (`eqxi.unvmap_any`: one schedule for a
-vmapped batch, not a select that computes both): on the slow manifold ``v = N/L − Ṅ/L² + …``, so a
-body on it has ``|v − N/L| ≈ |Ṅ|/L² = (|Ṅ|/(L|N|)) |N/L|``, small where the problem is stiff,
-while one at rest, spinning, or at ``u = S`` (`jaxrot.Fluid.angular_velocity`'s velocity) is off
-by at least ``|N/L|``. The start runs iff some body has ``|v − N/L|_∞ > ½ |N/L|_∞`` (+ round-off):
-measured on the probe, ``|v − N/L| / |N/L|`` is 0.008 on the manifold at ``ζ/I = 1e3``, 0.08 at
-100 and 0.8 at 10 (where ``N`` turns at ``ζ/I``'s own rate and no manifold is separated: there
-the start runs, 40–80 substeps), and ≥ 1 off it. An earlier threshold at round-off fired wrongly
-both ways; this one is relative to what a body on the manifold must show. Decided at every step
-instead, the start stopped once the layer fell below ``½ |N/L|`` and left that rest to plain steps
-(a floor, 7.5e-10 rad spinning at ``ζ/I = 1e3``, 400 steps). ``graded_start=False`` turns it off.
+each next substep ``e^{L_min s/5}`` times the last, capped at the step, for as long as that
+schedule is below ``h`` (``5 ln(min(3, L/ω))/L_min`` from the run's start, whatever ``h``). Then
+``L s₀ = ω h``: the layer's error is ``≈ 5 (ωh)⁴ B/L²``, of the smooth steps' own order and smaller
+by ``B/L²``. Two meshes tried before did not scale with ``h`` and bent the slope where the layer
+dominates the run's error: ``1/(16 L) + 0.15 (t − t₀)`` over 7 steps (order 1.3 at ``ζ/I = 10``,
+issue 73) and ``min(h/3, 1/(16 L))`` growing as here (its fixed part ``5 · 16⁻⁴ B/L²``: slope 3.56
+spinning at ``ζ/I = 10``, and 2.5 instead of 4 in `tests/test_fluid.py`'s order test at
+``St = 1``). Measured on `benchmarks/_fluid_probe.py` (`tests/test_fluid_start.py`, dt over a factor
+16): slopes 4.03–4.10 at ``ζ/I`` 10, 1e3, 1e5 from rest, spinning and on the manifold. The price:
+about ``5 (L_max/L_min)/(ω h)`` substeps once per run, a fixed share of a run's steps (on the probe,
+``L_max/L_min = 1.56``: 17 extra at 40 steps over ``t = 4``, 60 at 160, 235 at 640, at
+``ζ/I = 1e3``). ``s₀`` is floored so that the substeps fit the loop's cap (1024).
+
+The decision, once per run at `init` (``FluidCarry.layer``) and per body; a vmapped batch takes the
+graded branch when any body does (`eqxi.unvmap_any`), each body on its own schedule (one substep for a
+body whose schedule is done: a body's run in a batch is its run alone). On the slow manifold
+``v = N/L − Ṅ/L² + …``, so a body on it has ``|v − N/L| ≈ (|Ṅ|/(L|N|)) |N/L|``, small where the
+problem is stiff, while one at rest, spinning or at ``u = S`` is off by at least ``|N/L|``. The start
+runs iff ``|v − N/L|_∞ > ½ |N/L|_∞`` (+ round-off). Measured on the probe: the ratio is 0.008 on the
+manifold at ``ζ/I = 1e3``, 0.08 at 100, 0.8 at 10 (there ``N`` turns at ``ζ/I``'s own rate, no
+manifold is separated, and the start runs), and ≥ 1 off it. (An earlier threshold at round-off
+fired wrongly both ways; decided at every step instead, the start stopped once the layer fell below
+``½ |N/L|`` and left that rest to plain steps: 7.5e-10 rad spinning at ``ζ/I = 1e3``, a floor.)
+``graded_start=False`` turns it off.
 """
 
 import equinox.internal as eqxi
@@ -44,11 +48,9 @@ import jax.numpy as jnp
 from .. import quaternion as quat
 
 
-# The graded start (this module): the first substep min(r h, σ / L_max), each next one e^{L_min s / 5}
-# times the last (a geometric mesh over the layer, in proportion to the step while hL < σ / r); on while
-# the layer's deviation from the manifold exceeds κ times the manifold's own offset N/L.
+# The graded start (this module's docstring): the first substep h min(r, c ω / L_max), each next one
+# e^{L_min s / 5} times the last; on where the layer's deviation from the manifold exceeds κ |N/L|.
 _STEP_FRACTION = 1 / 3  # r
-_LAYER_RESOLUTION = 1 / 16  # σ
 _GROWTH_EXPONENT = 1 / 5  # the cost-optimal grading for a local error ∝ s⁵ e^{−L t}
 _LAYER_TOLERANCE = 0.5  # κ
 _MAX_SUBSTEPS = 1024
