@@ -23,15 +23,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import fluid_layer  # noqa: E402
 
 
-def test_graded_start_counts_its_steps_and_can_be_turned_off():
-    assert ExpRK4().in_fluid().start_steps == 7
+def test_graded_start_can_be_turned_off():
+    assert ExpRK4().in_fluid().start_steps == 1
     assert ExpRK4(graded_start=False).in_fluid().start_steps == 0
     assert ExpRK4().start_steps == 0  # without a fluid: no layer to resolve
 
 
 def test_graded_start_is_a_run_of_its_substeps():
     """The graded first step equals the same substeps taken one by one with `step`: the substep sizes
-    are ``1/(16 L_max) + 0.15 (t − t0)``, the last cut to end on the step."""
+    are ``s₀ e^{L_min (t − t0)/5}``, ``s₀ = dt min(1/3, ω/L_max)`` with ``ω = |S| + |N|^{1/2}`` at the
+    step's start, the last cut to end on the step (`jaxrot.schemes._graded_start`)."""
     scheme = ExpRK4().in_fluid()
     run = fluid_layer.runner(ExpRK4(), 1e3)
     state = fluid_layer.start("off")
@@ -41,14 +42,15 @@ def test_graded_start_is_a_run_of_its_substeps():
     args = fluid_layer.FluidArgs(
         fluid_layer.FIELD, jaxrot._fluid._fluid.check_fluid(fluid_layer.fluid(), (), jnp.float64)[0]
     )
-    # The start in one program too (eagerly, each of its operations compiled one by one).
     carry = jax.jit(lambda s: scheme.init(s, 0.0, inertia, fluid_layer.torque, args))(state)
-    # One compiled step for every substep (t and the size are runtime values): run eagerly, each
-    # substep dispatched its operations one by one, which compiled each of them.
+    assert bool(carry.layer)  # at rest: off the slow manifold
+    # One compiled step for every substep (t and the size are runtime values).
     step = jax.jit(lambda c, t, size: scheme.step(c, t, size, inertia, fluid_layer.torque, args))
+    omega = float(np.linalg.norm(carry.slow) + np.sqrt(np.linalg.norm(carry.forcing)))
+    first = dt * min(1 / 3, max(omega / 1e3, 1 / (256 * dt * 1e3)))
     t, sizes = 0.0, []
     while True:
-        size = 1 / (16 * 1e3) + 0.15 * t
+        size = first * np.exp(1e3 * t / 5)
         if size >= dt - t:
             size = dt - t
         sizes.append(size)
@@ -63,8 +65,9 @@ def test_graded_start_is_a_run_of_its_substeps():
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_graded_start_finite_far_into_the_stiff_limit(dtype):
-    """ζΔt/I = 1e8 and 1e12: the first step's substeps, (1/0.15) ln(1 + 2.4 hL) ≈ 130 and 190, fit
-    the loop's cap of 256; the body ends turning at the slow velocity."""
+    """ζΔt/I = 1e8 and 1e12: the first step's substeps, about 5 (L_max/L_min)/(ω h) (12.5/(ω h) here),
+    fit the loop's cap of 256 (its last substep would take the rest); the body ends turning at the slow
+    velocity."""
     fluid = jaxrot.Fluid(fluid_layer.FRICTION.astype(dtype))
     # The slow velocity at t = 8 in one program, not one per eager operation.
     slow_velocity = jax.jit(

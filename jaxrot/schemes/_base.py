@@ -80,12 +80,19 @@ class AbstractScheme(eqx.Module):
 
     @property
     def start_steps(self) -> int:
-        """How many steps from a run's start `start_step` takes instead of `step` (0: none)."""
+        """How many steps from a run's start `start_step` takes instead of `step` (0: none), as the
+        default `starting` reads it; a scheme that overrides `starting` returns any positive number."""
         return 0
 
     def start_step(self, carry, t, dt, t0, inertia: BodyInertia, torque: Torque | None, args) -> Any:
-        """One of the first `start_steps` steps of a run that began at ``t0``; `step` unless overridden."""
+        """A step of a run's start (where `starting` holds); `step` unless overridden."""
         return self.step(carry, t, dt, inertia, torque, args)
+
+    def starting(self, carry, index, t, t0, dt, inertia: BodyInertia, args):
+        """Whether step ``index`` (from 0, at ``t``, of a run begun at ``t0``) is a `start_step`:
+        a boolean scalar that does not depend on the body (under `jax.vmap` the choice must stay one
+        branch); the first `start_steps` steps unless overridden."""
+        return index < self.start_steps
 
     def state(self, carry) -> RotState:
         """The `RotState` held in a carry."""
@@ -138,8 +145,9 @@ def body_torque(torque: Torque | None, t, q, omega, args):
 def advance(
     scheme: AbstractScheme, carry, index, t, t0, dt, inertia: BodyInertia, torque: Torque | None, args
 ):
-    """Step ``index`` (from 0) of a run begun at ``t0``: `AbstractScheme.start_step` for the first
-    ``scheme.start_steps``, `AbstractScheme.step` after.
+    """Step ``index`` (from 0) of a run begun at ``t0``: `AbstractScheme.start_step` where
+    `AbstractScheme.starting` holds (the first ``scheme.start_steps`` by default), `AbstractScheme.step`
+    elsewhere.
 
     ``index`` must not depend on the body (a loop counter): under `jax.vmap` the choice stays one
     branch, not a select that would compute both.
@@ -147,7 +155,7 @@ def advance(
     if scheme.start_steps == 0:
         return scheme.step(carry, t, dt, inertia, torque, args)
     return jax.lax.cond(
-        index < scheme.start_steps,
+        scheme.starting(carry, index, t, t0, dt, inertia, args),
         lambda c: scheme.start_step(c, t, dt, t0, inertia, torque, args),
         lambda c: scheme.step(c, t, dt, inertia, torque, args),
         carry,

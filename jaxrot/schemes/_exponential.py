@@ -36,18 +36,8 @@ tableau dropped to order 3 for ``hL ≫ 1``, as it did when an ω-independent to
 ``N`` as ``I⁻¹ τ``. As ``hL → ∞`` the scheme tends to the tableau's classical method (``z = 0``)
 applied to the overdamped model ``q̇ = ½ q ⊗ (0, S)``.
 
-The start of a run: a body started off the slow manifold (at rest in a shear or a field, say)
-relaxes within ``I/ζ``, and while it does ``N`` varies on that time scale, not on the step's: the
-stiff orders assume a smooth ``N`` and fail there (measured on a dipole in a rotating field at
-``ζ/I = 1000`` started at rest: the error fell at order 1.2–1.5 over ``hL`` from 60 to 8, with a
-plateau near 1e-6 rad). So the first `GRADED_STEPS` steps of a run are taken in substeps that grow
-from ``1/(16 L_max)`` by ``α = 0.15`` times the time since the start (a graded mesh over the
-layer: ``s = 1/(16 L_max) + α (t − t_0)``, the last one cut to end on the step), after which a
-substep is the step (or sooner, once ``e^{−L_min (t − t_0)}`` is below 2e-16): with it the same
-probe keeps order 4 from ``hL = 500`` down to 4 and levels at about 4e-12 rad below
-(`benchmarks/fluid_layer.py`, docs/fluid_layer.json). It costs
-``(1/α) ln(1 + 16 α hL)`` substeps once per run (about 60 at ``hL = 500``, 150 at ``1e8``);
-``graded_start=False`` turns it off for a run that starts on the slow manifold.
+The start of a run off the slow manifold (a boundary layer of width ``I/ζ``) is taken in graded
+substeps: `jaxrot.schemes._graded_start` has the mesh, the decision and their measurements.
 
 Without a fluid (``L = 0``, ``S = 0``) every ``φ_k`` is ``1/k!`` and the scheme is the tableau's
 classical Runge–Kutta method on ``(q, ω_b)``.
@@ -58,7 +48,6 @@ import math
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
-import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -68,20 +57,12 @@ from .._core._fusion import stage
 from .._fluid._flow import body_flow
 from .._inertia import body_inertia
 from .._state import RotState
+from . import _graded_start
 from ._base import AbstractScheme, world_torque
 from ._lie_runge_kutta import CHARTS, add_terms
 from ._phi import phi_functions
 from ._rkn_splitting import uses_omega
 
-
-# The graded start (module docstring): substeps from 1/(16 L_max), growing by 0.15 × the time since the
-# start; a substep reaches the step within 1/0.15 steps. The cap bounds the first step's substeps,
-# (1/α) ln(1 + 16 α hL) ≈ 190 at hL = 1e12.
-_LAYER_RESOLUTION = 16.0
-_LAYER_GROWTH = 0.15
-GRADED_STEPS = math.ceil(1 / _LAYER_GROWTH)
-_MAX_SUBSTEPS = 256
-_LAYER_DECAYED = 36.0  # e^-36 = 2e-16
 
 Term = tuple[float, int, float]  # (coefficient, k, node): coefficient · φ_k(node · z)
 
@@ -171,11 +152,14 @@ class FluidCarry(NamedTuple):
         state: the `RotState` ``(q (4,), omega (3,))``, world ω.
         slow: the slow velocity ``S`` ``(3,)`` (body frame) at the state: the next step's first stage.
         forcing: ``N`` ``(3,)`` of equation (1) at the state: the next step's first stage.
+        layer: ``()`` bool, whether the body began its run off its slow manifold (`init`; the graded
+            start's decision, kept for the run), or None.
     """
 
     state: RotState
     slow: jax.Array
     forcing: jax.Array
+    layer: jax.Array | None = None
 
 
 class FluidArgs(NamedTuple):
@@ -227,30 +211,19 @@ class AbstractExponentialLieRK(AbstractScheme):
 
     @property
     def start_steps(self) -> int:
-        return GRADED_STEPS if self.fluid and self.graded_start else 0
+        return 1 if self.fluid and self.graded_start else 0
+
+    def starting(self, carry, index, t, t0, dt, inertia, args):
+        """Whether the step at ``t`` is graded (`jaxrot.schemes._graded_start.starting`)."""
+        return _graded_start.starting(carry, t, t0, dt, _rates(inertia, args))
 
     def start_step(self, carry, t, dt, t0, inertia, torque, args):
-        """A step of the start, in graded substeps (the module's docstring; in a fluid only)."""
-        rate = args.fluid.friction * _diagonal(inertia).inverse
-        smallest = 1 / (_LAYER_RESOLUTION * jnp.max(rate))
-        slowest = jnp.min(rate)
-        dt = jnp.asarray(dt, carry.state.q.dtype)
+        """A step of the start, in graded substeps (`jaxrot.schemes._graded_start`; in a fluid only)."""
 
-        def unfinished(loop):
-            done, _, _ = loop
-            return ~done
+        def step(carry, t, size):
+            return self.step(carry, t, size, inertia, torque, args)
 
-        def substep(loop):
-            _, offset, carry = loop
-            elapsed = (t - t0) + offset
-            size = smallest + _LAYER_GROWTH * elapsed
-            # Once e^{-L_min (t - t0)} is below float64's resolution, nothing is left to resolve.
-            last = (size >= dt - offset) | (elapsed * slowest >= _LAYER_DECAYED)
-            size = jnp.where(last, dt - offset, size)
-            return last, offset + size, self.step(carry, t + offset, size, inertia, torque, args)
-
-        start = (jnp.zeros((), bool), jnp.zeros_like(dt), carry)
-        return eqxi.while_loop(unfinished, substep, start, max_steps=_MAX_SUBSTEPS, kind="bounded")[2]
+        return _graded_start.graded_step(step, carry, t, dt, t0, _rates(inertia, args))
 
     def state(self, carry):
         return carry.state if self.fluid else carry
@@ -268,13 +241,16 @@ class AbstractExponentialLieRK(AbstractScheme):
         q, omega = state
         u = quat.rotate(quat.conjugate(q), omega)
         slow, forcing, _ = self._evaluate(t0, q, inertia, torque, args, fluid, velocity=u)
-        return FluidCarry(RotState(q, omega), slow, forcing)
+        carry = FluidCarry(RotState(q, omega), slow, forcing)
+        if not self.graded_start:
+            return carry
+        return carry._replace(layer=_graded_start.off_manifold(carry, fluid.friction * inertia.inverse))
 
     def step(self, carry, t, dt, inertia, torque, args):
         if self.fluid:
             args, fluid = args
             inertia = _diagonal(inertia)
-            (q0, omega0), slow0, forcing0 = carry
+            (q0, omega0), slow0, forcing0, layer = carry
             rate = fluid.friction * inertia.inverse
             z = -dt * rate
 
@@ -297,7 +273,7 @@ class AbstractExponentialLieRK(AbstractScheme):
             forcing0 = evaluate(t, q0, deviation0)[1]
         q1, u1, slow1, forcing1 = self._advance(q0, deviation0, forcing0, slow0, t, dt, z, evaluate)
         state1 = RotState(q1, quat.rotate(q1, u1))
-        return FluidCarry(state1, slow1, forcing1) if self.fluid else state1
+        return FluidCarry(state1, slow1, forcing1, layer) if self.fluid else state1
 
     def _advance(self, q0, deviation0, forcing0, slow0, t, h, z, evaluate, stages=False):
         """One step of the stages in the module's docstring: ``(q1, u1, S1, N1)`` (``S1``, ``N1`` at the
@@ -412,6 +388,11 @@ def _plain_forcing(t, q, u, inertia, torque, args):
     if torque is not None:
         tau_b = quat.rotate(quat.conjugate(q), world_torque(torque, t, q, quat.rotate(q, u), args))
     return inertia.angular_acceleration(u, tau_b)
+
+
+def _rates(inertia, args):
+    """``L = ζ/I`` ``(3,)`` of one body (principal moments about the friction's axes)."""
+    return args.fluid.friction * _diagonal(inertia).inverse
 
 
 def _diagonal(inertia):
