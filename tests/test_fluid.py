@@ -370,8 +370,11 @@ def test_orders_with_a_fluid(name, stokes, stokes_one_reference):
     """Fitted order of the final orientation error (t = 4, with the magnetic torque, from the slow
     manifold) within 0.1 of the nominal: against `jaxrot.reference_rollout` at St = 1, against the
     same scheme at a 16th of the finest step below (where Dopri8 would need 1e6 steps). Order 5 within
-    0.2: its errors span 2e-7 … 5e-13, where the next term of the expansion still tilts a four-rung fit
-    (measured: 5.15 at St = 1, local orders 5.22 → 5.15 → 5.03 as dt halves; 4.83 at 1e-3, 4.99 at 1e-6)."""
+    0.3, the tolerance issue 73 sets for a slope under the graded start: its errors span 1e-7 … 1e-13,
+    where the next term of the expansion still tilts a four-rung fit (measured with the graded start of
+    `jaxrot.schemes._graded_start`: 4.78 at St = 1e-3, ζΔt/I 30 … 450, local orders rising 4.70 → 4.77
+    → 4.87 as dt halves and 5.37 at 256 steps, near the reference's round-off; 5.15 at St = 1, local
+    orders 5.22 → 5.15 → 5.03; 4.99 at 1e-6)."""
     inertia = spheroid_inertia(stokes)
     state = on_slow_manifold(magnetic_torque, MAGNET)
     run = magnet_in_shear_runner(name)  # one program for both Stokes numbers
@@ -382,7 +385,7 @@ def test_orders_with_a_fluid(name, stokes, stokes_one_reference):
     else:
         reference = run(state, inertia, 4.0 / (16 * steps[-1]), 16 * steps[-1])
     errors = np.array([float(quat.angle_between(run(state, inertia, 4.0 / n, n), reference)) for n in steps])
-    assert fitted_order(4.0 / steps, errors) == pytest.approx(order, abs=0.1 if order < 5 else 0.2)
+    assert fitted_order(4.0 / steps, errors) == pytest.approx(order, abs=0.1 if order < 5 else 0.3)
 
 
 # The exponential schemes; the thermal ones, which run this model at kT = 0 too, are held at these
