@@ -45,7 +45,13 @@ from jaxrot import quaternion as quat  # noqa: E402
 from jaxrot._fit._identify import _solve  # noqa: E402
 from jaxrot._fit._identify._check import check_arguments  # noqa: E402
 from jaxrot._fit._identify._health import diagnose  # noqa: E402
-from jaxrot._fit._identify._model import n_head, n_own, residuals, residuals_and_jacobian  # noqa: E402
+from jaxrot._fit._identify._model import (  # noqa: E402
+    n_dynamic,
+    n_head,
+    n_own,
+    residuals,
+    residuals_and_jacobian,
+)
 from jaxrot._fit._identify._problem import build_problem  # noqa: E402
 from jaxrot._fit._identify._scheme import choose_scheme  # noqa: E402
 from jaxrot._fit._identify._start import starting_point  # noqa: E402
@@ -133,9 +139,12 @@ def main(argv=None):
             times[name].append(time.perf_counter() - t)
     steps = model.data.step_start.shape[1]
     tangents = n_head(model.layout) + n_own(model.layout)
-    print(f"{opts.problem}: {settings.k} experiments, {steps} steps each, scheme {model.scheme.name}, "
-          f"J {as_run.jac.shape}, {tangents} tangents per experiment's rollout; "
-          f"window steps {_solve.windows(model, settings)}")  # fmt: skip
+    moving = sum(n_dynamic(model.layout))
+    print(
+        f"{opts.problem}: {settings.k} experiments, {steps} steps each, scheme {model.scheme.name}, "
+        f"J {as_run.jac.shape}, {tangents} tangents per experiment's readings, {moving} in its rollout; "
+        f"window steps {_solve.windows(model, settings)}"
+    )
     print(f"iterations {as_run.n_iterations}, evaluations (residuals + Jacobian) {as_run.evaluations}, "
           f"converged {as_run.converged}, loss {as_run.history[-1]:.6g}")  # fmt: skip
     print("| stage | median [ms] |\n|---|---|")
