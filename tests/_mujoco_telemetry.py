@@ -281,3 +281,53 @@ def replay(manoeuvre, inertia=INERTIA, substeps=2):
     every = int(round((m.t[1] - m.t[0]) / (m.t_c[1] - m.t_c[0])))
     q, omega = q[::every], omega[::every]
     return np.asarray(q), np.asarray(quat.rotate(quat.conjugate(q), omega))
+
+
+# Real sensors on MuJoCo's data (issue 74's profile): a gyro bias per manoeuvre, a gyro scale factor and
+# delay, a tracker mounted at a small rotation of the body frame and with a delay of its own. Delays
+# are whole MuJoCo steps, so a delayed reading is an exact MuJoCo row.
+TRUE_SENSORS = {
+    "gyro_bias": np.array([[2.0e-3, -1.0e-3, 1.5e-3], [-3.0e-3, 2.0e-3, 0.5e-3], [1.0e-3, 1.0e-3, -2.5e-3]]),
+    "gyro_scale": np.array([1.002, 0.999, 1.0015]),
+    "gyro_delay": np.array(0.004),
+    "tracker_mount": np.array([0.01, -0.02, 0.005]),
+    "tracker_delay": np.array(0.007),
+}
+
+
+def sensor_manoeuvres(seeds=SEEDS, *, duration=DURATION, noise_seed=None, sensors=None):
+    """`manoeuvres` seen through the flawed sensors ``sensors`` (default `TRUE_SENSORS`).
+
+    Tracker reading ``q(t − tracker_delay) ⊗ exp(tracker_mount)``, gyro reading
+    ``gyro_scale ⊙ ω_b(t − gyro_delay) + gyro_bias[i]`` (`jaxrot.identify`'s sensor models), then the
+    noise of `manoeuvres` (σ = `SIGMA_Q`, `SIGMA_OMEGA`). The samples are at 100 Hz from the first
+    whose delayed readings fall inside the record; ``q0``, ``omega_body0`` are the state there.
+    """
+    _require_mujoco()
+    s = TRUE_SENSORS if sensors is None else sensors
+    model = mujoco.MjModel.from_xml_string(model_xml(INERTIA))
+    n_steps = int(round(duration / TIMESTEP))
+    lag = [int(round(float(s[name]) / TIMESTEP)) for name in ("tracker_delay", "gyro_delay")]
+    rng = None if noise_seed is None else np.random.default_rng(noise_seed)
+    mount = quat.exp(jnp.asarray(s["tracker_mount"]))
+    out = []
+    for i, seed in enumerate(seeds):
+        q0, omega_body0 = initial_state(seed)
+        tau_c = torque_profile(seed, n_steps + 1)
+        t, rows, _ = simulate(model, q0, omega_body0, tau_c)
+        k = np.arange(SAMPLE_EVERY, n_steps + 1, SAMPLE_EVERY)  # every reading's delayed row exists
+        q = np.asarray(quat.multiply(jnp.asarray(rows[k - lag[0], :4]), mount))
+        gyro = s["gyro_scale"] * rows[k - lag[1], 4:7] + s["gyro_bias"][i]
+        if rng is not None:
+            turn = quat.exp(jnp.asarray(rng.normal(size=(k.size, 3)) * SIGMA_Q))
+            q = np.asarray(quat.multiply(jnp.asarray(q), turn))
+            gyro = gyro + rng.normal(size=gyro.shape) * SIGMA_OMEGA
+        noisy = rng is not None
+        out.append(
+            Manoeuvre(
+                t=t[k], q=q, omega_body=gyro, t_c=t[:n_steps], tau_c=tau_c[:n_steps], q0=rows[k[0], :4],
+                omega_body0=rows[k[0], 4:7], sigma_q=SIGMA_Q if noisy else 0.0,
+                sigma_omega=SIGMA_OMEGA if noisy else 0.0,
+            )
+        )  # fmt: skip
+    return out

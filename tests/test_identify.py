@@ -297,15 +297,29 @@ def test_jacobian_is_finite_at_a_sphere_at_rest():
     assert np.all(np.isfinite(fit.loss_history))
 
 
-def test_per_experiment_jacobian_is_the_full_forward_jacobian():
+@pytest.mark.parametrize("sensors", [None, "all"])
+def test_per_experiment_jacobian_is_the_full_forward_jacobian(sensors):
     """`identify` pushes through each experiment only the tangents it depends on (the shared head
-    and its own block); the zero blocks are filled in. The result must be ``jax.jacfwd`` of the
+    and its own block); the zero blocks are filled in. With sensor parameters, the rollout carries
+    only the tangents that move it and the readings are differentiated through the nodes'
+    linearisation (`_model.residuals_jacobian_factor`). The result must be ``jax.jacfwd`` of the
     whole residual vector: the same operations on each tangent, batched differently, so entries
     agree to reassociation only: ~10³ operations per entry (20 steps of a few dozen) at float64's
     1.1e-16, inside 1e-11 of the largest entry. The model is built by identify's own stages
-    (check → start → problem), without compiling the fit."""
+    (check → start → problem), without compiling the fit. The triangular factor of ``[J | r]`` made
+    from each experiment's rows (`_model._block_factor`) is a QR factor of the whole: ``RᵀR = AᵀA``
+    for ``A = [J | r]``, to a backward-stable QR's round-off, a small multiple of ``eps ‖A‖²``
+    (1e-13 ‖A‖²_F is 450 eps: the reflections of two QRs of ~150 rows and 17 columns)."""
     from jaxrot._fit._identify._check import check_arguments
-    from jaxrot._fit._identify._model import n_head, n_own, residuals, residuals_and_jacobian, states
+    from jaxrot._fit._identify._model import (
+        n_dynamic,
+        n_head,
+        n_own,
+        residuals,
+        residuals_and_jacobian,
+        residuals_jacobian_factor,
+        states,
+    )
     from jaxrot._fit._identify._problem import build_problem
     from jaxrot._fit._identify._start import starting_point
 
@@ -326,14 +340,23 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian():
     settings = check_arguments(
         experiments, torque=torque, args={"gain": jnp.array(0.8)}, free_args={"gain": True}, inertia0=None,
         free_inertia=True, scheme="zhao", dt=0.05, q0=None, omega0=None, max_iter=10, ftol=1e-10,
-        rcond=None, sensors=None,
+        rcond=None, sensors=None if sensors is None else dict.fromkeys(
+            ("gyro_bias", "gyro_scale", "gyro_delay", "tracker_mount", "tracker_delay"), True),
     )  # fmt: skip
     problem = build_problem(settings, starting_point(settings))
     phi, model = jnp.asarray(problem.phi0), problem.model
+    if sensors is not None:  # off the ideal values, so that every sensor term is exercised
+        phi = phi + 0.01 * jnp.sin(jnp.arange(phi.size))
     r, jac, (q, omega) = jax.jit(residuals_and_jacobian)(phi, model)
     full = jax.jit(jax.jacfwd(residuals))(phi, model)
     head, own = n_head(model.layout), n_own(model.layout)
-    assert (head, own) == (6 + 1, 6)
+    assert n_dynamic(model.layout) == (6 + 1, 6)
+    assert (head, own) == ((6 + 1, 6) if sensors is None else (6 + 1 + 3 + 1 + 3 + 1, 6 + 3))
+    _, _, _, factor = jax.jit(residuals_jacobian_factor)(phi, model)
+    both = jnp.concatenate([jac, r[:, None]], axis=1)
+    np.testing.assert_allclose(
+        factor.T @ factor, both.T @ both, rtol=0, atol=1e-13 * float(jnp.sum(both * both))
+    )
     assert jac.shape == full.shape == (r.size, head + 2 * own)
     # The values ride along as jacfwd's primal, compiled in another program: each of the 20 steps
     # rounds the state by a few eps (~1e-15 rad), whitened by σ = 1e-3: 1e-11 is 10× that margin.

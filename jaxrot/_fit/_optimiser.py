@@ -77,11 +77,14 @@ def triangular_factor(a):
     return jnp.triu(jax.lax.fori_loop(0, n, reflect, a)[:n])
 
 
-def _least_squares_step(jac, r, minimum_norm):
+def _least_squares_step(jac, r, minimum_norm, factor=None):
     """The Gauss–Newton step ``d`` minimising ``|J d + r|``: ``J = Q R``, then the SVD of ``R`` (the
-    minimum-norm ``d``) or a triangular solve."""
+    minimum-norm ``d``) or a triangular solve. ``factor``: the triangular factor ``(n + 1, n + 1)`` of
+    ``[J | r]`` when the caller has it (`search_step`'s ``factor_of``)."""
     m, n = jac.shape
-    if m > n:
+    if factor is not None:
+        upper, q_r = factor[:n, :n], factor[:n, n]
+    elif m > n:
         # ``Qᵀ r`` without ``Q``: the triangular factor of ``[J | r]`` holds ``R`` and, in its last
         # column, ``Qᵀ r`` (the same reflections applied to ``r``). Forming the 3 267 × 27 ``Q`` of
         # identify's satellite took 0.83 ms of the step's 2.8 (XLA:CPU profile, per iteration).
@@ -155,14 +158,16 @@ def start_search(z0, shapes):
     )  # fmt: skip
 
 
-def search_step(s, evaluate, force, minimum_norm):
+def search_step(s, evaluate, force, minimum_norm, factor_of=None):
     """One trial of Gauss–Newton with backtracking Armijo: ``(Search, accepted, predicted decrease)``.
 
     The trial ``z + α d`` is evaluated (``evaluate(z) -> (r, J, aux)``) and accepted when ``force`` (a
     pass's start) or when its objective is strictly lower and within Armijo's test; then the next
     proposal is the full Gauss–Newton step from the accepted point (``α = 1``), or the same step
     halved after a rejection. ``predicted``: the model's decrease for the full step from the
-    accepted point (`_converged`).
+    accepted point (`_converged`). ``factor_of(aux)``: the triangular factor of ``[J | r]`` where the
+    evaluation computed it more cheaply than a QR of the whole ``J`` (`jaxrot.identify`: from each
+    experiment's own columns); None: the QR of ``[J | r]`` here.
     """
     z_try = s.z + s.alpha * s.d
     r_try, jac_try, aux_try = evaluate(z_try)
@@ -175,7 +180,7 @@ def search_step(s, evaluate, force, minimum_norm):
         (z_try, r_try, jac_try, aux_try, f_try),
         (s.z, s.r, s.jac, s.aux, s.f),
     )
-    d = _least_squares_step(jac, r, minimum_norm)
+    d = _least_squares_step(jac, r, minimum_norm, None if factor_of is None else factor_of(aux))
     moved = jac @ d
     predicted = -jnp.sum((2 * r + moved) * moved)  # the model's decrease for the full step
     one = jnp.ones((), s.alpha.dtype)

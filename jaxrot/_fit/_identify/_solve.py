@@ -46,7 +46,7 @@ import numpy as np
 
 from .._optimiser import MAX_REJECTIONS, Search, _converged, search_step, start_search, trace_once
 from ._experiment import KINDS
-from ._model import INDEX, residuals_and_jacobian
+from ._model import INDEX, residuals_jacobian_factor
 
 
 WINDOW_DATA = 5  # informative residuals per parameter in the first window
@@ -160,7 +160,8 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
 
     def evaluate(z, active, sigma):
         m = eqx.tree_at(lambda m: (m.active, m.data.sigma), model, (active, sigma))
-        return residuals_and_jacobian(z, m)
+        r, jac, states, factor = residuals_jacobian_factor(z, m)
+        return r, jac, (states, factor)
 
     # Traced once here, called from the loop's body: one Jacobian program for every pass.
     total = plan.total.astype(INDEX)
@@ -176,7 +177,11 @@ def _staged_gauss_newton(z0, model, plan, max_iter, size: int):
 
     def body(c):
         s, accept, predicted = search_step(
-            c.search, lambda z: evaluate_traced(z, c.active, c.sigma), c.fresh, minimum_norm=True
+            c.search,
+            lambda z: evaluate_traced(z, c.active, c.sigma),
+            c.fresh,
+            minimum_norm=True,
+            factor_of=lambda aux: aux[1],
         )
         n = c.n + (accept & ~c.fresh).astype(jnp.int32)
         far = c.probe & (plan.n_windows > 0) & ((plan.use_windows == 1) | (
@@ -263,7 +268,7 @@ def solve(problem, settings, speed, *, use_windows=None) -> Solution:
     model = eqx.tree_at(lambda m: m.data.sigma, model, jnp.asarray(sigma, dtype))
     # Sliced in NumPy: slicing the device array by a new length compiled a jit(dynamic_slice) each time.
     history = np.asarray(end.history, np.float64)[: max(int(end.slot), 1)]
-    states = tuple(np.asarray(x, np.float64) for x in end.search.aux)
+    states = tuple(np.asarray(x, np.float64) for x in end.search.aux[0])
     return Solution(
         np.asarray(end.search.z, np.float64), history, int(end.n), bool(end.converged), raw, jac, states,
         model, bool(end.windowed), int(end.evaluations),
