@@ -1,7 +1,9 @@
-"""A/B of `jaxrot.schemes.baoab`'s one traced rotor (``_ONE_ROTOR``) against two, in one process.
+"""A/B of the smaller BAOAB program against the one before, in one process.
 
-Both A steps of a BAOAB step run the free rotor; traced once in a loop of two iterations, the step's
-program is about half the size. This measures, for jaxrot.jax_md's ``nvt_langevin`` (float64, dt 1/16
+Both A steps of a BAOAB step run the free rotor: traced once in a loop of two iterations
+(`jaxrot.schemes.baoab._ONE_ROTOR`), not twice; and the rotor's first two DMV steps run in its while
+loop (`jaxrot._free_body._rotor_loop._MERGED`), not in a static loop before it. "before" has both
+switches off, "after" both on. This measures, for jaxrot.jax_md's ``nvt_langevin`` (float64, dt 1/16
 free bodies, 1/64 tetrahedra, kT 1, gamma 10): the compiled size (HLO instructions) and compile time of
 `benchmarks/first_call.py`'s 1000-step loop on 40 tetrahedra, then the step's speed (a 100-step loop
 on 10⁴ free bodies and on 128 interacting tetrahedra), the variants interleaved, wall and CPU time,
@@ -30,6 +32,7 @@ from jax_md import rigid_body  # noqa: E402
 from jax_md_systems import free_system, shape, tetrahedra  # noqa: E402
 
 import jaxrot.jax_md as jm  # noqa: E402
+from jaxrot._free_body import _rotor_loop  # noqa: E402
 from jaxrot.schemes import baoab  # noqa: E402
 
 
@@ -37,6 +40,11 @@ def _ops(compiled):
     return sum(
         1 for line in compiled.as_text().splitlines() if " = " in line and not line.lstrip().startswith("//")
     )
+
+
+def _switch(after):
+    baoab._ONE_ROTOR = _rotor_loop._MERGED = after
+    jax.clear_caches()  # free_rotor is jitted: its trace would be reused across the switch
 
 
 def _loop(system, dt, steps):
@@ -50,24 +58,25 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=11)
     rounds = parser.parse_args(argv).rounds
-    for one in (False, True):
-        baoab._ONE_ROTOR = one
+    for after in (False, True):
+        _switch(after)
         loop, state = _loop(tetrahedra(40), 1 / 64, 1000)
         start = time.perf_counter()
         compiled = loop.lower(state).compile()
         seconds = time.perf_counter() - start
-        print(f"first-call loop, one rotor {one}: compile {seconds:.1f} s, {_ops(compiled)} HLO ops")
+        name = ("before", "after")[after]
+        print(f"first-call loop, {name}: compile {seconds:.1f} s, {_ops(compiled)} HLO ops")
     runs = {}
     for label, (system, dt) in {
         "free": (free_system(10_000), 1 / 16),
         "tetrahedra": (tetrahedra(128), 1 / 64),
     }.items():
-        for one in (False, True):
-            baoab._ONE_ROTOR = one
+        for after in (False, True):
+            _switch(after)
             loop, state = _loop(system, dt, 100)
             compiled = loop.lower(state).compile()
             jax.block_until_ready(compiled(state))
-            runs[label, one] = (compiled, state, [], [])
+            runs[label, after] = (compiled, state, [], [])
     for _ in range(rounds):
         for compiled, state, wall, cpu in runs.values():
             start, start_cpu = time.perf_counter(), time.process_time()
@@ -79,7 +88,7 @@ def main(argv=None):
     for label in ("free", "tetrahedra"):
         (_, _, w0, c0), (_, _, w1, c1) = runs[label, False], runs[label, True]
         w0, w1, c0, c1 = map(statistics.median, (w0, w1, c0, c1))
-        print(f"{label:10s} two rotors {w0 * 1e3:7.0f} ms (cpu {c0 * 1e3:6.0f}), one {w1 * 1e3:7.0f} ms "
+        print(f"{label:10s} before {w0 * 1e3:7.0f} ms (cpu {c0 * 1e3:6.0f}), after {w1 * 1e3:7.0f} ms "
               f"(cpu {c1 * 1e3:6.0f}): wall {w1 / w0:.3f}x, cpu {c1 / c0:.3f}x")  # fmt: skip
 
 
