@@ -180,10 +180,13 @@ def _primal_step(params, s):
 def _dmv_steps(q, m, p, fad, h, n):
     """``n >= _MIN_SUBSTEPS`` DMV steps of one body: component tuples ``q`` (4) and ``m`` (3) → the same.
 
-    The first `_MIN_SUBSTEPS` in a static loop, the rest in a while loop that a body in the common
-    range never enters (`_repeat`). JAX cannot reverse-differentiate a while loop, so the derivative
-    rule carries the extra steps' Jacobian as a value: the tangent is the static steps' derivative
-    followed by a product with that Jacobian, which reverse mode can transpose.
+    All in one while loop, which a body in the common range leaves after `_MIN_SUBSTEPS` iterations
+    (`_repeat`; with `LOOP_BATCH` > 1 the first in a static loop before it). JAX cannot
+    reverse-differentiate a while loop, so the derivative rule differentiates the first steps as a
+    static loop and carries the extra steps' Jacobian as a value: the tangent is the static steps'
+    derivative followed by a product with that Jacobian, which reverse mode can transpose (carrying
+    the Jacobian through all the steps instead cut the rotor's gradient program from 10.8k to 6.5k
+    HLO ops and its compile by a third, but ran its gradient 3x slower at |ω| t = 0.3).
     """
     return _repeat(
         _primal_step, n - _MIN_SUBSTEPS, (q, m), (p, fad, h), first=_MIN_SUBSTEPS, batch=_loop_batch()
