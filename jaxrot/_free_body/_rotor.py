@@ -26,13 +26,14 @@ Here the time ``t`` is covered by ``n = ⌈|ω| |t| / a⌉`` equal DMV10 steps, 
 error ``O(a¹¹)`` per step, so round-off at any ``|ω| |t|`` up to 10 rad. The steps use the
 scaling symmetry of the flow and of the DMV map (both functions of ``h m``): ``n`` steps of
 ``t/n`` with the momentum ``m`` are computed as ``n`` steps of ``t/2`` with ``(2/n) m``, so the
-step length stays one scalar. The first two steps are a static loop; the rest a while loop
-that a body in the common range never enters (under `jax.vmap`, one loop over the batch with a
-scalar counter, by a batching rule of our own), whose derivative rule carries the steps'
-Jacobian (JAX cannot reverse-differentiate a while loop): `jaxrot._free_body._rotor_loop`. Traced
-for a GPU, the loop takes 4 steps per iteration and each body's count past the first two is
-rounded up to a multiple of 4 (`_rotor_loop.LOOP_BATCH`): there every iteration waits on a host
-read of its condition. The map itself is `jaxrot._free_body._dmv`. Measured against `free_motion`
+step length stays one scalar. The steps run in one while loop (traced for a GPU, the first two in a
+static loop before it), which a body in the common range leaves after two iterations (under
+`jax.vmap`, one loop over the batch with a scalar counter, by a batching rule of our own), whose
+derivative rule carries the steps' Jacobian (JAX cannot reverse-differentiate a while loop):
+`jaxrot._free_body._rotor_loop`. Traced for a GPU, the loop takes 4 steps per iteration and each
+body's count past the first two is rounded up to a multiple of 4 (`_rotor_loop.LOOP_BATCH`): there
+every iteration waits on a host read of its condition. The map itself is `jaxrot._free_body._dmv`.
+Measured against `free_motion`
 (largest orientation error in rad, or ω error relative to ``|ω|``; float64; bodies ``(1, 2,
 3)``, ``(2, 2, 2)``, ``(1, 1, 1.9)``, ``(0.1, 1, 1.05)``)::
 
@@ -109,7 +110,7 @@ __all__ = ["free_rotor", "free_rotor_momentum"]
 # DMV10 steps per call. By default each body takes its own number, n = ceil(|ω| |t| / a) with the
 # largest angle per DMV step a below, at least 2 (_MIN_SUBSTEPS) and at most _MAX_SUBSTEPS. Two is
 # the least: the common range |ω| t <= 0.3 (float64) then costs what a fixed two did; the first two
-# steps are a static loop, the rest a while loop that such calls never enter.
+# steps are computed whatever the count, the rest only where a body needs them.
 _MAX_SUBSTEPS = 64
 # Largest angle of one DMV step chosen by the rule, per dtype: the local error grows like a¹¹, so
 # 0.2 keeps float64 within ~1e-13 of the exact flow at any |ω| t (measured: 2 steps at 0.5 rad

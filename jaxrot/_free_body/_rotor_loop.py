@@ -1,4 +1,4 @@
-"""The DMV steps of one body repeated: a static loop, then a while loop with our own batching rule
+"""The DMV steps of one body repeated: a while loop (on a GPU a static loop first) with our own batching rule
 and a derivative rule that carries the steps' Jacobian (JAX cannot reverse-differentiate a while
 loop). `jaxrot._free_body._rotor` chooses the counts; `LOOP_BATCH` sets the steps per iteration.
 """
@@ -13,8 +13,9 @@ from .._core._fusion import tracing_for_cpu
 from ._dmv import _dmv_step
 
 
-# The least DMV10 steps per call (`jaxrot._free_body._rotor`'s rule): a static loop; the rest of a
-# body's count runs in the while loop.
+# The least DMV10 steps per call (`jaxrot._free_body._rotor`'s rule). The primal runs them in the while
+# loop with the rest (traced for a GPU, with `LOOP_BATCH` > 1, a static loop before it); the derivative
+# rule differentiates them as a static loop and carries the Jacobian of the rest.
 _MIN_SUBSTEPS = 2
 LOOP_BATCH = None
 """DMV steps per iteration of the rotor's while loop: ``None`` (default) is 1 when tracing for CPU
@@ -30,6 +31,12 @@ docs/performance.md): 4 per iteration ran splitting, srkn6b and srkn14a 2.5×, 2
 20% there, 2 gained less (1.5-1.8× at 8 steps). On the CPU (N = 1000, 2 cores) 4 and 8 ranged
 0.68-1.13×."""
 _GPU_LOOP_BATCH = 4
+# The primal's first steps inside the while loop (`_repeat`), not a static loop before it: one traced
+# DMV step instead of two. Measured (jax 0.12, 2 cores at load ~8): the rotor's program 3,384 -> 2,522
+# HLO ops (vmapped, float32), jax_md's 1000-step BAOAB loop 7,981 -> 7,041 and its XLA compile
+# 11.3 -> 9.3 s (median of 3 interleaved); forward speed at N = 10⁴ 0.97-1.03x (wall), 0.98-1.04x
+# (CPU), 11 interleaved rounds, |ω| t = 0.3 and 0.9, float64 and float32. False: the static loop.
+_MERGED = True
 
 
 def _loop_batch() -> int:
@@ -56,8 +63,9 @@ def _repeat(step, n, state, params, *, first=0, batch=1, custom=True):
     """``step(params, state)`` applied ``first + n`` times to one body (``n`` a multiple of ``batch``).
 
     ``state`` is a tuple of groups, each a tuple of scalar components or an array; ``step`` sees
-    each group as an array (components stacked). The ``first`` steps are a static loop, the ``n``
-    more a while loop. One body: a loop on its own count. Under `jax.vmap` (a custom rule, not
+    each group as an array (components stacked). The ``first`` steps run in the while loop with the
+    ``n`` more (its counter from ``-first``; with ``batch > 1`` a static loop before it). One body:
+    a loop on its own count. Under `jax.vmap` (a custom rule, not
     JAX's): one loop over the batch with a scalar counter up to the largest count, each body's state
     kept once its own count is done, and every group component-major (the batch axis last, so the
     components of a tuple group are contiguous rows). JAX's rule counted per body, reduced the
@@ -78,7 +86,13 @@ def _repeat(step, n, state, params, *, first=0, batch=1, custom=True):
         return s
 
     def loops(step_once, n, s, top, mask):
-        if first:
+        start = 0
+        if first and batch == 1 and _MERGED:
+            # The first steps in the while loop too (its counter from -first; n >= 0, so the mask
+            # keeps them): one traced step instead of two, and a body in the common range runs
+            # the loop's first two iterations instead of a static loop of two.
+            start = -first
+        elif first:
             s = lax.fori_loop(0, first, lambda _, s: step_once(s), s)
 
         def body(c):
@@ -88,7 +102,7 @@ def _repeat(step, n, state, params, *, first=0, batch=1, custom=True):
                 new = jax.tree_util.tree_map(lambda a, b: jnp.where(i < n, a, b), new, s)
             return i + batch, new
 
-        return lax.while_loop(lambda c: c[0] < top, body, (jnp.zeros((), n.dtype), s))[1]
+        return lax.while_loop(lambda c: c[0] < top, body, (jnp.full((), start, n.dtype), s))[1]
 
     def run(n, state, params):
         s = loops(lambda s: step(params, s), n, tuple(map(_gather, state)), n, mask=False)
@@ -166,10 +180,13 @@ def _primal_step(params, s):
 def _dmv_steps(q, m, p, fad, h, n):
     """``n >= _MIN_SUBSTEPS`` DMV steps of one body: component tuples ``q`` (4) and ``m`` (3) → the same.
 
-    The first `_MIN_SUBSTEPS` in a static loop, the rest in a while loop that a body in the common
-    range never enters (`_repeat`). JAX cannot reverse-differentiate a while loop, so the derivative
-    rule carries the extra steps' Jacobian as a value: the tangent is the static steps' derivative
-    followed by a product with that Jacobian, which reverse mode can transpose.
+    All in one while loop, which a body in the common range leaves after `_MIN_SUBSTEPS` iterations
+    (`_repeat`; with `LOOP_BATCH` > 1 the first in a static loop before it). JAX cannot
+    reverse-differentiate a while loop, so the derivative rule differentiates the first steps as a
+    static loop and carries the extra steps' Jacobian as a value: the tangent is the static steps'
+    derivative followed by a product with that Jacobian, which reverse mode can transpose (carrying
+    the Jacobian through all the steps instead cut the rotor's gradient program from 10.8k to 6.5k
+    HLO ops and its compile by a third, but ran its gradient 3x slower at |ω| t = 0.3).
     """
     return _repeat(
         _primal_step, n - _MIN_SUBSTEPS, (q, m), (p, fad, h), first=_MIN_SUBSTEPS, batch=_loop_batch()
