@@ -45,13 +45,8 @@ from jaxrot import quaternion as quat  # noqa: E402
 from jaxrot._fit._identify import _solve  # noqa: E402
 from jaxrot._fit._identify._check import check_arguments  # noqa: E402
 from jaxrot._fit._identify._health import diagnose  # noqa: E402
-from jaxrot._fit._identify._model import (  # noqa: E402
-    n_dynamic,
-    n_head,
-    n_own,
-    residuals,
-    residuals_and_jacobian,
-)
+from jaxrot._fit._identify._jacobian import n_dynamic, residuals_and_jacobian  # noqa: E402
+from jaxrot._fit._identify._model import n_head, n_own, residuals  # noqa: E402
 from jaxrot._fit._identify._problem import build_problem  # noqa: E402
 from jaxrot._fit._identify._scheme import choose_scheme  # noqa: E402
 from jaxrot._fit._identify._start import starting_point  # noqa: E402

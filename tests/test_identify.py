@@ -302,24 +302,17 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(sensors):
     """`identify` pushes through each experiment only the tangents it depends on (the shared head
     and its own block); the zero blocks are filled in. With sensor parameters, the rollout carries
     only the tangents that move it and the readings are differentiated through the nodes'
-    linearisation (`_model.residuals_jacobian_factor`). The result must be ``jax.jacfwd`` of the
+    linearisation (`_jacobian.residuals_jacobian_factor`). The result must be ``jax.jacfwd`` of the
     whole residual vector: the same operations on each tangent, batched differently, so entries
     agree to reassociation only: ~10³ operations per entry (20 steps of a few dozen) at float64's
     1.1e-16, inside 1e-11 of the largest entry. The model is built by identify's own stages
     (check → start → problem), without compiling the fit. The triangular factor of ``[J | r]`` made
-    from each experiment's rows (`_model._block_factor`) is a QR factor of the whole: ``RᵀR = AᵀA``
+    from each experiment's rows (`_jacobian._block_factor`) is a QR factor of the whole: ``RᵀR = AᵀA``
     for ``A = [J | r]``, to a backward-stable QR's round-off, a small multiple of ``eps ‖A‖²``
     (1e-13 ‖A‖²_F is 450 eps: the reflections of two QRs of ~150 rows and 17 columns)."""
     from jaxrot._fit._identify._check import check_arguments
-    from jaxrot._fit._identify._model import (
-        n_dynamic,
-        n_head,
-        n_own,
-        residuals,
-        residuals_and_jacobian,
-        residuals_jacobian_factor,
-        states,
-    )
+    from jaxrot._fit._identify._jacobian import n_dynamic, residuals_and_jacobian, residuals_jacobian_factor
+    from jaxrot._fit._identify._model import n_head, n_own, residuals, states
     from jaxrot._fit._identify._problem import build_problem
     from jaxrot._fit._identify._start import starting_point
 

@@ -25,9 +25,9 @@ from ._brownian import (
 )
 from ._exponential import (
     AbstractExponentialLieRK as AbstractExponentialLieRK,
-    ExponentialTableau as ExponentialTableau,
     FluidCarry as FluidCarry,
 )
+from ._exponential_tableau import ExponentialTableau as ExponentialTableau
 from ._langevin import AbstractLangevinScheme as AbstractLangevinScheme
 from ._lie_runge_kutta import (
     AbstractLieRungeKutta as AbstractLieRungeKutta,

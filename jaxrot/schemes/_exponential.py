@@ -44,13 +44,11 @@ classical Runge–Kutta method on ``(q, ω_b)``.
 """
 
 import dataclasses
-import math
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .. import quaternion as quat
 from .._core._fusion import stage
@@ -59,90 +57,9 @@ from .._inertia import body_inertia
 from .._state import RotState
 from . import _graded_start
 from ._base import AbstractScheme, world_torque
-from ._lie_runge_kutta import CHARTS, add_terms
-from ._phi import phi_functions
+from ._exponential_tableau import ExponentialTableau, _combine, _weights
+from ._lie_runge_kutta import CHARTS
 from ._rkn_splitting import uses_omega
-
-
-Term = tuple[float, int, float]  # (coefficient, k, node): coefficient · φ_k(node · z)
-
-
-class ExponentialTableau(NamedTuple):
-    """An explicit exponential Runge–Kutta method: its coefficient functions as sums of φ-functions.
-
-    Attributes:
-        c: the nodes of stages 2, …, s (stage 1 is at 0).
-        a: for each of stages 2, …, s, ``{j: terms}``: ``a_ij(z) = Σ coefficient · φ_k(node · z)``
-            over its terms ``(coefficient, k, node)`` (``j`` counts stages from 0).
-        b: ``{j: terms}``, the weights of the step.
-        b_embedded: ``{j: terms}``, the weights of an embedded method of lower order on the same
-            stages (its difference from ``b`` is the step's error estimate), or None.
-    """
-
-    c: tuple[float, ...]
-    a: tuple[dict[int, tuple[Term, ...]], ...]
-    b: dict[int, tuple[Term, ...]]
-    b_embedded: dict[int, tuple[Term, ...]] | None = None
-
-    @property
-    def num_stages(self) -> int:
-        return len(self.c) + 1
-
-    def rows(self):
-        """``(node, row)`` of stages 2, …, s, then ``(1.0, b)``."""
-        return [*zip(self.c, self.a, strict=True), (1.0, self.b)]
-
-    def embedded(self) -> "ExponentialTableau":
-        """The embedded weights as a tableau of one row (`_weights` of it: the embedded step's weights)."""
-        return ExponentialTableau(c=(), a=(), b=self.b_embedded)
-
-    def k_max(self) -> int:
-        """The highest φ-function the ``Θ``-rows need (one above the highest term)."""
-        return 1 + max(k for _, row in self.rows() for terms in row.values() for _, k, _ in terms)
-
-    def check(self):
-        """``Σ_j a_ij(z) = c_i φ_1(c_i z)``, ``Σ_j b_j(z) = φ_1(z)`` (and ``b_embedded``) at a few ``z``."""
-        embedded = [] if self.b_embedded is None else [(1.0, self.b_embedded)]
-        for node, row in self.rows() + embedded:
-            for z in (0.0, -0.3, -4.0, -60.0):
-                total = sum(_term_value(t, z) for terms in row.values() for t in terms)
-                expected = node * float(phi_functions(np.float64(node * z), 1, np)[1])
-                if abs(total - expected) > 1e-12 * max(1.0, abs(expected)):
-                    raise TypeError(
-                        f"exponential tableau row at node {node}: Σ a(z={z}) = {total}, not {expected}."
-                    )
-
-
-def _term_value(term, z):
-    coefficient, k, node = term
-    return coefficient * float(phi_functions(np.float64(node * z), k, np)[k])
-
-
-def _weights(tableau: ExponentialTableau, z):
-    """For each row: ``(e^{c z}, c φ_1(c z), {j: a_ij(z)}, {j: ã_ij(z)}, {j: a_ij(0)})``.
-
-    ``z = −hL`` ``(3,)``, or None (no friction): then the Python numbers of ``z = 0``."""
-    k_max = tableau.k_max()
-    nodes = sorted(
-        {node for node, _ in tableau.rows()}
-        | {t[2] for _, r in tableau.rows() for ts in r.values() for t in ts}
-    )
-    if z is None:
-        phis = {node: [1 / math.factorial(k) for k in range(k_max + 1)] for node in nodes}
-    else:
-        phis = {node: phi_functions(node * z, k_max) for node in nodes}
-    rows = []
-    for node, row in tableau.rows():
-        a = {j: sum(c * phis[nu][k] for c, k, nu in terms) for j, terms in row.items()}
-        a_int = {j: sum(c * nu * phis[nu][k + 1] for c, k, nu in terms) for j, terms in row.items()}
-        a_zero = {j: sum(c / math.factorial(k) for c, k, _ in terms) for j, terms in row.items()}
-        rows.append((phis[node][0], node * phis[node][1], a, a_int, a_zero))
-    return rows
-
-
-def _sum(weights, values):
-    """``Σ_j weights[j] · values[j]`` over the nonzero weights, or None."""
-    return add_terms([w * values[j] for j, w in weights.items() if not (isinstance(w, float) and w == 0.0)])
 
 
 class FluidCarry(NamedTuple):
@@ -284,18 +201,8 @@ class AbstractExponentialLieRK(AbstractScheme):
         # K_1 − V_1 = S_1: Θ_1 = 0, where dexp⁻¹ is the identity.
         rotation_terms = [jnp.zeros_like(deviation0) if slow0 is None else slow0]
         rows = _weights(self.tableau, z)
-        for i, ((decay, transient, a, a_int, a_zero), (node, _)) in enumerate(
-            zip(rows, self.tableau.rows(), strict=True)
-        ):
-            deviation = decay * deviation0
-            increment = _sum(a, forcings)
-            if increment is not None:
-                deviation = deviation + h * increment
-            theta = (h * transient) * deviation0
-            for weights, values, scale in ((a_int, forcings, h * h), (a_zero, rotation_terms, h)):
-                part = _sum(weights, values)
-                if part is not None:
-                    theta = theta + scale * part
+        for i, (row, (node, _)) in enumerate(zip(rows, self.tableau.rows(), strict=True)):
+            theta, deviation = _combine(row, deviation0, forcings, rotation_terms, h)
             # Stage boundaries (`jaxrot._core._fusion`): without them XLA recomputes earlier stages later.
             theta, deviation = stage(theta, deviation)
             rotation, chart_scalar = stage(*chart(theta))
@@ -342,11 +249,9 @@ class AbstractExponentialLieRK(AbstractScheme):
         q1, u1, slow1, forcing1, (_, deviation1, forcings, rotation_terms) = self._advance(
             q0, deviation0, forcing0, slow0, t, dt, z, evaluate, stages=True
         )
-        # The embedded row, as `_advance` combines a row (the same arithmetic, without an evaluation).
-        ((decay, transient, a, a_int, a_zero),) = _weights(self.tableau.embedded(), z)
-        deviation_hat = decay * deviation0 + dt * _sum(a, forcings)
-        theta_hat = (dt * transient) * deviation0 + dt * dt * _sum(a_int, forcings)
-        theta_hat = theta_hat + dt * _sum(a_zero, rotation_terms)
+        # The embedded row, combined as `_advance` combines a row (without an evaluation).
+        (row,) = _weights(self.tableau.embedded(), z)
+        theta_hat, deviation_hat = _combine(row, deviation0, forcings, rotation_terms, dt)
         chart, _ = CHARTS[self.chart]
         q_hat = quat.normalize(quat.multiply(q0, chart(theta_hat)[0]))
         error = RotState(q1 - q_hat, quat.rotate(q1, deviation1 - deviation_hat))

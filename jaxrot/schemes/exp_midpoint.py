@@ -2,7 +2,8 @@
 
 from typing import ClassVar
 
-from ._exponential import AbstractExponentialLieRK, ExponentialTableau
+from ._exponential import AbstractExponentialLieRK
+from ._exponential_tableau import ExponentialTableau
 
 
 # The second-order method with c_2 = 1/2 (Hochbruck & Ostermann 2005, section 5.1): the weights

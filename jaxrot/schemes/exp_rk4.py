@@ -2,7 +2,8 @@
 
 from typing import ClassVar
 
-from ._exponential import AbstractExponentialLieRK, ExponentialTableau
+from ._exponential import AbstractExponentialLieRK
+from ._exponential_tableau import ExponentialTableau
 
 
 def _scaled(terms, factor):

@@ -4,7 +4,8 @@ with an embedded method of stiff order 4 on the same stages."""
 from fractions import Fraction
 from typing import ClassVar
 
-from ._exponential import AbstractExponentialLieRK, ExponentialTableau
+from ._exponential import AbstractExponentialLieRK
+from ._exponential_tableau import ExponentialTableau
 
 
 _C = (

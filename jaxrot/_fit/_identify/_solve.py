@@ -46,7 +46,8 @@ import numpy as np
 
 from .._optimiser import MAX_REJECTIONS, Search, _converged, search_step, start_search, trace_once
 from ._experiment import KINDS
-from ._model import INDEX, residuals_jacobian_factor
+from ._jacobian import residuals_jacobian_factor
+from ._model import INDEX
 
 
 WINDOW_DATA = 5  # informative residuals per parameter in the first window
