@@ -42,7 +42,6 @@ fired wrongly both ways; decided at every step instead, the start stopped once t
 """
 
 import equinox.internal as eqxi
-import jax
 import jax.numpy as jnp
 
 from .. import quaternion as quat
@@ -59,9 +58,11 @@ _LAYER_DECAYED = 36.0  # e^-36 = 2e-16
 
 
 def _rates(rate):
-    """``(L_min, L_max)`` of one body."""
-    # The schedule is a discretisation, like dt: not differentiated.
-    rate = jax.lax.stop_gradient(rate)
+    """``(L_min, L_max)`` of one body.
+
+    Differentiated like the rest of the step: the substeps are functions of ``L`` (and of the carry),
+    so the gradient is the derivative of the discrete map a run computes, which central differences
+    of a parameter in ``ζ`` or ``I`` check (`tests/test_fluid.py`); only the substeps' count is flat."""
     return jnp.min(rate), jnp.max(rate)
 
 
