@@ -52,18 +52,13 @@ class _H(logging.Handler):
         elif "seconds to compile" in msg and "took at least" in msg:
             s["written"] += 1
             _pending["kind"] = "written"
-        elif "Persistent compilation cache hit" in msg:
-            s["hit"] += 1
+        elif "Persistent compilation cache hit" in msg or "PERSISTENT COMPILATION CACHE MISS" in msg:
+            kind = "hit" if "cache hit" in msg else "miss"
+            s[kind] += 1
             m = _KEY.search(msg)
             if m:
                 _pending.update(name=m.group(1), key=m.group(2))
-            _pending["kind"] = "hit"
-        elif "PERSISTENT COMPILATION CACHE MISS" in msg:
-            s["miss"] += 1
-            m = _KEY.search(msg)
-            if m:
-                _pending.update(name=m.group(1), key=m.group(2))
-            _pending["kind"] = "miss"
+            _pending["kind"] = kind
         elif "because it took <" in msg:
             s["refused_fast"] += 1
 

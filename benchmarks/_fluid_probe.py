@@ -93,9 +93,13 @@ def start(kind, rate):
 
 def runner(scheme, rate):
     """``run(state, dt, n) -> q`` after ``n`` steps: one compiled program for any dt and n."""
+    return final_orientation_runner(scheme, jaxrot.body_inertia(inertia(rate)), torque, fluid_args())
+
+
+def final_orientation_runner(scheme, inert, torque, args):
+    """``run(state, dt, n) -> q`` after ``n`` steps of ``scheme``'s fluid form from t = 0 (its graded
+    start included), ``advance``d as `jaxrot.rollout` takes them: dt and n runtime values."""
     scheme = scheme.in_fluid()
-    inert = jaxrot.body_inertia(inertia(rate))
-    args = fluid_args()
 
     @jax.jit
     def run(state, dt, n):

@@ -26,13 +26,13 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
+from _fluid_probe import final_orientation_runner  # benchmarks/, beside this script
 
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot._fluid._fluid import check_fluid
 from jaxrot.comparison import machine_info
 from jaxrot.schemes import FLUID_SCHEMES
-from jaxrot.schemes._base import advance
 from jaxrot.schemes._exponential import FluidArgs
 
 
@@ -63,18 +63,8 @@ def start(kind):
 
 def runner(scheme, rate):
     """``run(state, dt, n) -> q``: one compilation for any dt and n."""
-    scheme = scheme.in_fluid()
-    inertia = jaxrot.body_inertia(FRICTION / rate)
     args = FluidArgs(FIELD, check_fluid(fluid(), (), jnp.float64)[0])
-
-    @jax.jit
-    def run(state, dt, n):
-        t0 = jnp.zeros(())
-        carry = scheme.init(state, t0, inertia, torque, args)
-        step = lambda i, c: advance(scheme, c, i, i * dt, t0, dt, inertia, torque, args)  # noqa: E731
-        return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
-
-    return run
+    return final_orientation_runner(scheme, jaxrot.body_inertia(FRICTION / rate), torque, args)
 
 
 def ladder(name, rate, graded, kind):
