@@ -99,18 +99,15 @@ class BAOAB(AbstractLangevinScheme):
 
     @staticmethod
     def _turn(q, omega, extra):
+        """The turn ``q ⊗ exp(extra ⊙ u)`` (``u = R(q)ᵀ ω``, body frame) that moves an A step by ``c``."""
         return quat.multiply(q, quat.exp(extra * quat.rotate(quat.conjugate(q), omega)))
 
     def _drift(self, q, omega, moments, s, extra, first):
         """A: the rotor over ``s`` and the turn ``q ⊗ exp(extra ⊙ u)``, the turn first when ``first``."""
-
-        def turn(q, omega):
-            return quat.multiply(q, quat.exp(extra * quat.rotate(quat.conjugate(q), omega)))
-
         if first:
-            q = turn(q, omega)
+            q = self._turn(q, omega, extra)
         q, omega = free_rotor(q, omega, moments, s, substeps=self.rotor_substeps)
-        return (turn(q, omega) if not first else q), omega
+        return (self._turn(q, omega, extra) if not first else q), omega
 
     def weights(self, friction, moments, kT, dt, noise: bool) -> "BAOABWeights":
         """The step's weights, per principal axis: functions of ``ζΔt/I``, ``kT`` and ``Δt`` alone.
