@@ -7,8 +7,13 @@ writes to fit all of them, beside the inertia and each manoeuvre's initial state
 (every flaw has a sysid expression; `SYSID_EXPRESSES` names the API each one uses):
 
 - **tracker mount**: a model parameter. The ``framequat`` sensor reads a site ``tracker`` of the body
-  (``q_site = q ⊗ q_mount``, MuJoCo's frame composition), and a sysid ``Parameter`` with a modifier
-  writes the site's ``quat`` as ``exp(mount)`` before each compile;
+  (``q ⊗ q_site``, MuJoCo's frame composition), and a sysid ``Parameter`` with a modifier writes the
+  site's ``quat`` as ``exp(mount) ⊗ R₀`` before each compile. ``R₀`` = `TRACKER_BASE`, a quarter
+  turn, is the tracker's nominal mounting, and its readings are given in that frame (``q_obs ⊗ R₀``):
+  MuJoCo's compiler gives a site whose orientation is within ~1e-6 of its body's the body's own
+  orientation (``site_sameframe``), so about an identity base, sysid's finite-difference steps of
+  1.5e-8 rad see no change and the mount's column is zero (measured: the fit left it at 0, its
+  standard error 190 rad);
 - **gyro scale, gyro delay, tracker delay**: sysid's ``SignalTransform`` (``gain`` on the predicted
   gyro, ``delay`` on each sensor: the prediction resampled at ``t − delay``, linear between MuJoCo
   steps of 1 ms; at 0.35 rad/s that interpolation errs by (ω·dt)²/8 ≈ 2e-8, far under σ = 1e-4);
@@ -37,6 +42,7 @@ from _mujoco_sysid import (
     _inertia_of,
     _initial_state_rollout,
     _quat_exp,
+    _quat_mul,
     _sequences,
     _theta_of,
     fit_problem,
@@ -51,6 +57,7 @@ except ImportError:
     mujoco = sysid = None
 
 DELAY_BOUND = 0.0095  # s: under the 10 ms between the controls' start and the first sample
+TRACKER_BASE = np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])  # a quarter turn about body z
 PAD = 13  # held control steps past the last one: the prediction reaches ≥ DELAY_BOUND past the last sample
 MOUNT_BOUND = 0.1  # rad per axis of the tracker's mounting rotation vector
 SCALE_BOUND = 0.1  # gyro scale within 1 ± 0.1
@@ -72,11 +79,11 @@ def sensor_model_xml(inertia=INERTIA0):
     """`_mujoco_telemetry.model_xml` with the orientation sensor on a site ``tracker`` of the body."""
     xml = model_xml(inertia)
     for old, new in (
-        ('<site name="imu"/>', '<site name="imu"/>\n      <site name="tracker"/>'),
+        ('<site name="imu"/>', '<site name="imu"/>\n      <site name="tracker" quat="{}"/>'),
         ('objtype="xbody" objname="body"', 'objtype="site" objname="tracker"'),
     ):
         assert xml.count(old) == 1, old
-        xml = xml.replace(old, new)
+        xml = xml.replace(old, new.format(" ".join(repr(float(x)) for x in TRACKER_BASE)))
     return xml
 
 
@@ -93,7 +100,7 @@ def sysid_sensor_problem(manoeuvres, *, inertia0=INERTIA0):
         spec.body("body").fullinertia = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
 
     def write_mount(spec, param):
-        spec.site("tracker").quat = _quat_exp(np.asarray(param.value))
+        spec.site("tracker").quat = _quat_mul(_quat_exp(np.asarray(param.value)), TRACKER_BASE)
 
     def box(name, nominal, bound, **kw):
         nominal = np.atleast_1d(np.asarray(nominal, dtype=float))
@@ -106,7 +113,9 @@ def sysid_sensor_problem(manoeuvres, *, inertia0=INERTIA0):
     params.add(box("gyro_scale", np.ones(3), SCALE_BOUND))
     params.add(box("gyro_delay", 0.0, DELAY_BOUND))
     params.add(box("tracker_delay", 0.0, DELAY_BOUND))
-    first_q = [m.q[0] for m in manoeuvres]
+    first_q = [m.q[0] for m in manoeuvres]  # the body's orientation, the start of the initial states
+    # The tracker's readings in its nominal frame (module docstring): what sysid compares.
+    manoeuvres = [m._replace(q=np.array([_quat_mul(q, TRACKER_BASE) for q in m.q])) for m in manoeuvres]
     first_omega = [m.omega_body[0] for m in manoeuvres]
     transforms = {}
     for j, (m, w) in enumerate(zip(manoeuvres, first_omega, strict=True)):
