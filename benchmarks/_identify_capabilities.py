@@ -57,7 +57,8 @@ CAPABILITIES = (
         "tracker mounted at a rotation of the body",
         _cell('`sensors["tracker_mount"]`', "sensors:tracker_mount", '"tracker_mount"'),
         _cell(
-            "a `Parameter` whose modifier writes the sensor site's `quat` (the model recompiled)",
+            "a `Parameter` whose modifier writes the sensor site's `quat` (the model recompiled), about a "
+            "base rotation: MuJoCo takes a site within ~1e-6 of its body's orientation for the body's",
             "Parameter",
             "spec.site(",
         ),
