@@ -24,8 +24,8 @@ gyro scale and delay, a misaligned and delayed tracker, fitted by both tools), a
 express: `benchmarks/identify_mujoco.py`. Skipped with a message where ``mujoco[sysid]`` is not
 installed (``pip install -e ".[mujoco]"``).
 
-    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo
-    python benchmarks/identify_speed.py --quick  # 2 rounds, 1 MuJoCo seed, one optimistix tolerance
+    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo (ideal and real sensors)
+    python benchmarks/identify_speed.py --quick  # 2 rounds, 1 seed per MuJoCo table, 1 optimistix tolerance
     python benchmarks/identify_speed.py --json docs/identify_speed_cpu.json  # the file the docs render
 """
 
