@@ -102,6 +102,11 @@ def test_prose_about_the_real_sensor_rows_matches_the_file(tmp_path):
     page = PAGE.read_text()
     for name in ("identify_sysid_table", "identify_sysid_sensors_table", "identify_capabilities_table"):
         assert f"{{{{ {name} }}}}" in page
+    from types import SimpleNamespace
+
+    page_ref = SimpleNamespace(file=SimpleNamespace(src_path="identification.md"))
+    rendered = _tables().on_page_markdown(page, page_ref, {"docs_dir": str(DOCS)}, None)
+    assert "{{ identify" not in rendered and "| `jaxrot.identify` | `mujoco.sysid` |" in rendered
     prose = " ".join(page.split())
     assert "both tools fit the inertia, every initial state and all five flaws" in prose
     data = json.loads((DOCS / RESULTS).read_text())
