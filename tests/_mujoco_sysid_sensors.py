@@ -64,8 +64,9 @@ SCALE_BOUND = 0.1  # gyro scale within 1 ± 0.1
 BIAS_BOUND = 0.05  # rad/s per axis
 Q0_BOUND = 0.1  # rad: the start's orientation offset (module docstring)
 
-# What sysid can express, each with the sysid name this module uses for it (checked against
-# mujoco.sysid and this file by tests/test_results_identify.py).
+# The flaws this module fits, each with the sysid name it uses: the benchmark's real-sensor row lists
+# them as fitted (and any flaw missing here as left out); benchmarks/_identify_capabilities.py is the
+# table a person reads, its names checked against mujoco.sysid by tests/test_results_identify.py.
 SYSID_EXPRESSES = {
     "gyro_bias": "SignalTransform.bias",
     "gyro_scale": "SignalTransform.gain",
