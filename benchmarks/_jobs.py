@@ -285,18 +285,23 @@ JOBS = {
     "identify_speed": Job(
         ("identify_speed_cpu.json",),
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
-        8,
+        # (user+sys)/2: the quiet run of 11:09 (1.67 cores x 303 s) plus the real-sensor rows (4 seeds:
+        # at most twice the 169 CPU s that 2 seeds and jaxrot's first call took under load)
+        7,
         quick=("benchmarks/identify_speed.py", "--quick", "--json", "{tmp}/identify_speed_cpu.json"),
-        quick_minutes=3,
-        tables=("identify_speed_table",),
+        quick_minutes=4,
+        tables=("identify_speed_table", "identify_sysid_table", "identify_sysid_sensors_table"),
         sources=(
             *BASE,
             *VACUUM,
             *DIFFRAX,
             *FIT,
             "benchmarks/identify_speed.py",
+            "benchmarks/identify_mujoco.py",
+            "benchmarks/_identify_capabilities.py",
             "tests/_mujoco_telemetry.py",
             "tests/_mujoco_sysid.py",
+            "tests/_mujoco_sysid_sensors.py",
         ),
     ),
     # MuJoCo 4.0 against jaxrot on the free body (needs `pip install -e ".[mujoco]"`; without it the

@@ -18,20 +18,14 @@ all fits alike);
 "same fit quality" is checked as the largest difference of the inertia and dipole between the two
 fits in units of jaxrot's standard errors, and the final losses.
 
-Then MuJoCo 4.0's `mujoco.sysid` on data MuJoCo made (`tests/_mujoco_telemetry.py`: a free body
-with a full inertia tensor, three 10 s manoeuvres under body-frame motor torques held for each
-1 ms step, orientation and gyro at 100 Hz, σ = 1e-4 rad and rad/s), as a user writes it
-(`tests/_mujoco_sysid.py`): fitting each manoeuvre's initial state too (a custom rollout), and
-with sysid's default initial state (the first samples). jaxrot fits the same data with the
-controls as MuJoCo applies them (``control_frame="body"``, ``control_hold="previous"``). Both
-start from the same sphere (0.045 kg m²) and the first samples; for each of ``--mujoco-seeds``
-noise seeds every fit runs once, round-robin; the rows give the median wall time (jaxrot's
-compiled, and its first call), the median relative error ‖I − I_true‖_F / ‖I_true‖_F, and how
-often the 95 % intervals of the six inertia elements hold the truth. Skipped with a message where
-``mujoco[sysid]`` is not installed (``pip install -e ".[mujoco]"``).
+Then MuJoCo 4.0's `mujoco.sysid` against `jaxrot.identify` on data MuJoCo made, with ideal sensors
+(``--mujoco-seeds`` noise seeds) and with real ones (``--sensor-seeds``: a gyro bias per manoeuvre,
+gyro scale and delay, a misaligned and delayed tracker, fitted by both tools), and what each tool can
+express: `benchmarks/identify_mujoco.py`. Skipped with a message where ``mujoco[sysid]`` is not
+installed (``pip install -e ".[mujoco]"``).
 
-    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo
-    python benchmarks/identify_speed.py --quick  # 2 rounds, 1 MuJoCo seed, one optimistix tolerance
+    python benchmarks/identify_speed.py      # ~3 minutes on 2 cores, +5 with MuJoCo (ideal and real sensors)
+    python benchmarks/identify_speed.py --quick  # 2 rounds, 1 seed per MuJoCo table, 1 optimistix tolerance
     python benchmarks/identify_speed.py --json docs/identify_speed_cpu.json  # the file the docs render
 """
 
@@ -57,6 +51,10 @@ from _telemetry import SATELLITE_DIPOLE, SATELLITE_INERTIA, dipole_torque, satel
 import jaxrot  # noqa: E402
 from jaxrot import quaternion as quat  # noqa: E402
 from jaxrot.comparison import machine_info  # noqa: E402
+
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from identify_mujoco import mujoco_identify_inputs, mujoco_rows  # noqa: E402, F401 (others import the inputs here)
 
 
 ELEMENTS = ((0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2))
@@ -151,101 +149,17 @@ def residuals(p, args):
     return jnp.where(jnp.isnan(r_q), 0.0, r_q), r_w
 
 
-Z95 = 1.959963984540054
-
-
-def mujoco_identify_inputs(manoeuvres):
-    """``(experiments, keywords)`` of `jaxrot.identify` for MuJoCo's manoeuvres (`tests/_mujoco_telemetry.py`;
-    needs MuJoCo): their held body-frame motor torques, the initial states from the first samples."""
-    import _mujoco_sysid as ms
-
-    experiments = [
-        jaxrot.Experiment(
-            m.t, q=m.q, omega_body=m.omega_body, sigma_q=m.sigma_q, sigma_omega=m.sigma_omega,
-            control=(m.t_c, m.tau_c), control_frame="body", control_hold="previous",
-        )
-        for m in manoeuvres
-    ]  # fmt: skip
-    q0 = np.stack([m.q[0] for m in manoeuvres])
-    omega0 = np.asarray(
-        quat.rotate(jnp.asarray(q0), jnp.asarray(np.stack([m.omega_body[0] for m in manoeuvres])))
-    )
-    return experiments, {"inertia0": ms.INERTIA0, "q0": q0, "omega0": omega0}
-
-
-def mujoco_rows(n_seeds):
-    """The jaxrot / mujoco.sysid comparison on MuJoCo's data (module docstring), or None without MuJoCo."""
-    try:
-        import _mujoco_sysid as ms
-        import _mujoco_telemetry as mt
-        from mujoco import sysid
-
-        if not hasattr(sysid, "optimize"):
-            raise ImportError("mujoco.sysid without its extra")
-    except ImportError as error:
-        print(f"\nmujoco.sysid rows skipped ({error}): pip install -e '.[mujoco]'")
-        return None
-    truth = mt.true_inertia()
-    upper = np.triu_indices(3)
-
-    def jaxrot_fit(manoeuvres):
-        experiments, keywords = mujoco_identify_inputs(manoeuvres)
-        fit = jaxrot.identify(experiments, **keywords)
-        return np.asarray(fit.inertia), fit.stderr.inertia
-
-    def sysid_fit(manoeuvres, fit_initial_state):
-        fit = ms.sysid_fit(manoeuvres, fit_initial_state=fit_initial_state)
-        return fit.inertia, fit.inertia_stderr
-
-    fits = {
-        "jaxrot.identify (controls held in the body frame)": jaxrot_fit,
-        "mujoco.sysid, fitting the initial state too (a custom rollout)": lambda m: sysid_fit(m, True),
-        "mujoco.sysid, initial state from the first samples (its default)": lambda m: sysid_fit(m, False),
-    }
-    first = time.perf_counter()
-    jax.block_until_ready(jaxrot_fit(mt.manoeuvres(noise_seed=0)))
-    first = time.perf_counter() - first
-    results = {label: [] for label in fits}
-    for seed in range(n_seeds):
-        manoeuvres = mt.manoeuvres(noise_seed=seed)
-        for label, fit in fits.items():
-            t0 = time.perf_counter()
-            inertia, se = jax.block_until_ready(fit(manoeuvres))
-            seconds = time.perf_counter() - t0
-            error = float(np.linalg.norm(inertia - truth) / np.linalg.norm(truth))
-            inside = np.abs(inertia - truth)[upper] <= Z95 * se[upper]
-            results[label].append((seconds, error, inside))
-            print(f"  seed {seed}: {label}: {seconds:.2f} s, error {error:.2e}, {inside.sum()}/6 inside")
-    rows = []
-    for label, runs in results.items():
-        rows.append(
-            {
-                "fit": label,
-                "median_s": statistics.median(r[0] for r in runs),
-                "first_call_s": first if label.startswith("jaxrot") else None,
-                "relative_error": statistics.median(r[1] for r in runs),
-                "coverage95": float(np.mean([r[2] for r in runs])),
-                "seeds": n_seeds,
-            }
-        )
-    print("\n| fit | median wall time [s] | relative error | 95 % interval coverage |")
-    print("|---|---|---|---|")
-    for row in rows:
-        cells = [
-            row["fit"],
-            f"{row['median_s']:.2f}",
-            f"{row['relative_error']:.1e}",
-            f"{row['coverage95']:.2f}",
-        ]
-        print("| " + " | ".join(cells) + " |")
-    return rows
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", default=None, help="also write the rows here")
     parser.add_argument(
         "--mujoco-seeds", type=int, default=4, help="noise seeds of the MuJoCo comparison (0: skip)"
+    )
+    parser.add_argument(
+        "--sensor-seeds",
+        type=int,
+        default=4,
+        help="noise seeds of the real-sensor MuJoCo comparison (0: skip)",
     )
     parser.add_argument("--rounds", type=int, default=7, help="interleaved timing rounds (median)")
     parser.add_argument(
@@ -253,7 +167,11 @@ def main(argv=None):
     )
     opts = parser.parse_args(argv)
     if opts.quick:
-        opts.rounds, opts.mujoco_seeds = 2, min(opts.mujoco_seeds, 1)
+        opts.rounds, opts.mujoco_seeds, opts.sensor_seeds = (
+            2,
+            min(opts.mujoco_seeds, 1),
+            min(opts.sensor_seeds, 1),
+        )
     tolerances = (1e-6,) if opts.quick else (1e-4, 1e-6, 1e-10)
     info = machine_info()
     print(info)
@@ -369,13 +287,12 @@ def main(argv=None):
     print(f"\nFastest diffrax + optimistix fit within 0.1 se of jaxrot's: {best[0]}")
     print(f"  compiled {best[2]:.2f} s against jaxrot's {run:.2f} s: jaxrot {best[2] / run:.1f}× faster")
     print(f"  first call {best[1]:.1f} s against jaxrot's {first:.1f} s: {best[1] / first:.2f}×")
-    mujoco = mujoco_rows(opts.mujoco_seeds) if opts.mujoco_seeds else None
+    mujoco = mujoco_rows(opts.mujoco_seeds, opts.sensor_seeds)
     if opts.json:
         keys = ("fit", "first_call_s", "compiled_s", "loss", "max_gap_se", "model_error_rad")
         out = {"machine": info, "rounds": opts.rounds}
         out["rows"] = [dict(zip(keys, r, strict=True)) for r in rows]
-        if mujoco is not None:
-            out["mujoco"] = mujoco
+        out |= mujoco or {}
         with open(opts.json, "w") as f:
             json.dump(out, f, indent=2)
 

@@ -66,7 +66,7 @@ class SysidFit(NamedTuple):
     half-widths of it (``calculate_intervals``); ``q0`` ``(k, 4)`` and ``omega_body0`` ``(k, 3)``
     the initial states used (fitted, or the first samples); ``wall_s`` seconds for the whole fit
     (the optimisation and the intervals), ``optimize_s`` the optimisation alone; ``log`` the
-    optimiser's printed trace.
+    optimiser's printed trace; ``extra`` further fitted parameters by name (`fit_problem`'s ``extra``).
     """
 
     inertia: np.ndarray
@@ -80,6 +80,7 @@ class SysidFit(NamedTuple):
     wall_s: float
     optimize_s: float
     log: str
+    extra: dict | None = None
 
 
 def _theta10(theta6, theta0):
@@ -110,8 +111,9 @@ def _quat_mul(p, q):
     return np.concatenate([[w1 * w2 - v1 @ v2], w1 * v2 + w2 * v1 + np.cross(v1, v2)])
 
 
-def _sequences(spec, model, manoeuvres):
-    """sysid's ``ModelSequences``: controls held per step, sensors at their MuJoCo time stamps."""
+def _sequences(spec, model, manoeuvres, min_pad=3):
+    """sysid's ``ModelSequences``: controls held per step, sensors at their MuJoCo time stamps; at least
+    ``min_pad`` held steps past the last control (a delayed sensor reads the prediction that late)."""
     dt = model.opt.timestep
     initial_states, controls, sensors = [], [], []
     for m in manoeuvres:
@@ -122,7 +124,7 @@ def _sequences(spec, model, manoeuvres):
         # sysid resamples the controls to the time step on ceil(span / dt) + 1 points: where span / dt
         # rounds past an integer (2002.0000000000002 for 2003 rows of 1 ms) the grid gains a point and
         # every held control is interpolated between two; the padding is chosen so that it is not.
-        for pad in range(3, 10):
+        for pad in range(min_pad, min_pad + 7):
             ctrl = np.vstack([m.tau_c, np.repeat(m.tau_c[-1:], pad, axis=0)])
             control = sysid.TimeSeries.from_control_names(m.t_c[0] + np.arange(len(ctrl)) * dt, ctrl, model)
             if control.resample(target_dt=dt).data.shape == ctrl.shape:
@@ -214,6 +216,13 @@ def sysid_fit(manoeuvres, *, inertia0=INERTIA0, fit_initial_state=True, max_iter
     """
     start = time.perf_counter()
     problem = sysid_problem(manoeuvres, inertia0=inertia0, fit_initial_state=fit_initial_state)
+    return fit_problem(problem, start, fit_initial_state=fit_initial_state, max_iters=max_iters)
+
+
+def fit_problem(problem, start, *, fit_initial_state=True, max_iters=100, extra=()):
+    """Run sysid's optimiser and intervals on a `SysidProblem` (`sysid_fit`'s second half); ``start``
+    is the ``time.perf_counter()`` at which the problem's construction began; ``extra``: names of
+    further parameters whose fitted values go into `SysidFit.extra`."""
     log = io.StringIO()
     opt_params, result = sysid.optimize(
         problem.params, problem.residual_fn, "mujoco", verbose=False, max_iters=max_iters, output=log
@@ -238,7 +247,7 @@ def sysid_fit(manoeuvres, *, inertia0=INERTIA0, fit_initial_state=True, max_iter
     q0, omega0 = problem.first_q, problem.first_omega
     if fit_initial_state:
         q0 = [_quat_mul(q, _quat_exp(opt_params[f"q0_offset_{j}"].value)) for j, q in enumerate(q0)]
-        omega0 = [opt_params[f"omega0_{j}"].value for j in range(len(manoeuvres))]
+        omega0 = [opt_params[f"omega0_{j}"].value for j in range(len(q0))]
     return SysidFit(
         inertia=inertia,
         inertia_stderr=stderr,
@@ -251,4 +260,5 @@ def sysid_fit(manoeuvres, *, inertia0=INERTIA0, fit_initial_state=True, max_iter
         wall_s=wall_s,
         optimize_s=optimize_s,
         log=log.getvalue(),
+        extra={name: np.array(opt_params[name].value) for name in extra},
     )

@@ -1,6 +1,12 @@
 """The identification page's tables (docs/identification.md): the fit's speed and `mujoco.sysid`."""
 
+import importlib.util
+from pathlib import Path
+
 from _tables_format import _provenance, _read, _table
+
+
+RERUN = "python benchmarks/regenerate.py --only identify_speed"
 
 
 def identify_speed_table(docs):
@@ -58,3 +64,63 @@ def identify_sysid_table(docs):
         f"parameters, with {theirs['relative_error'] / ours['relative_error']:.1f}× smaller errors."
     )
     return _table(header, table) + summary + _provenance("identify_speed_cpu.json", data["machine"])
+
+
+def identify_sysid_sensors_table(docs):
+    """The same comparison through real sensors (``"mujoco_sensors"`` of identify_speed_cpu.json): each
+    tool fitting the five sensor flaws. A file written before these rows says so instead of a table."""
+    data = _read(docs, "identify_speed_cpu.json")
+    rows = data.get("mujoco_sensors")
+    if not rows:
+        return (
+            f"*Not in `docs/identify_speed_cpu.json` yet (written before these rows): `{RERUN}` adds them.*"
+        )
+    header = ["fit", "median wall time [s]", "first call [s]", "relative error", "95 % interval coverage"]
+    header.append("sensor flaws left out")
+    table = [
+        [
+            r["fit"],
+            f"{r['median_s']:.2f}",
+            "—" if r["first_call_s"] is None else f"{r['first_call_s']:.1f}",
+            f"{r['relative_error']:.1e}",
+            f"{r['coverage95']:.2f}",
+            ", ".join(f"`{name}`" for name in r["left_out"]) or "none",
+        ]
+        for r in rows
+    ]
+    ours, theirs = rows[0], rows[1]
+    ratio = theirs["median_s"] / ours["median_s"]
+    summary = (
+        f"\n\nOver {ours['seeds']} noise seeds: `jaxrot.identify` {ratio:.0f}× "
+        f"as fast as `mujoco.sysid` fitting the same flaws; median errors {ours['relative_error']:.1e} "
+        f"against {theirs['relative_error']:.1e}."
+    )
+    ideal = data.get("mujoco")
+    if ideal:
+        summary += (
+            f" With real sensors jaxrot's fit takes {ours['median_s'] / ideal[0]['median_s']:.2f}× its time "
+            f"with ideal ones, sysid's {theirs['median_s'] / ideal[1]['median_s']:.2f}×."
+        )
+    return _table(header, table) + summary + _provenance("identify_speed_cpu.json", data["machine"])
+
+
+def capabilities(docs):
+    """`benchmarks/_identify_capabilities.CAPABILITIES`, loaded by its path (plain data, no imports)."""
+    path = Path(docs).resolve().parent / "benchmarks" / "_identify_capabilities.py"
+    spec = importlib.util.spec_from_file_location("_identify_capabilities", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def identify_capabilities_table(docs):
+    """What each tool can express, each cell from the code that drives it (`_identify_capabilities`)."""
+    module = capabilities(docs)
+    rows = [[what, ours["text"], theirs["text"]] for what, ours, theirs in module.CAPABILITIES]
+    drivers = "; ".join(
+        f"{tool}: " + ", ".join(f"`{f}`" for f in files) for tool, files in module.DRIVERS.items()
+    )
+    note = (
+        f"\n\n*Each cell is code the comparison runs ({drivers}); tests/test_results_identify.py checks it.*"
+    )
+    return _table(["what", "`jaxrot.identify`", "`mujoco.sysid`"], rows) + note

@@ -37,7 +37,9 @@ from _tables_fluid import (  # noqa: E402
     overdamped_cost_table,
 )
 from _tables_identify import (  # noqa: E402
+    identify_capabilities_table,
     identify_speed_table,
+    identify_sysid_sensors_table,
     identify_sysid_table,
 )
 from _tables_jax_md import (  # noqa: E402
@@ -130,6 +132,8 @@ TABLES = {
     "readme_energy_sentence": readme_energy_sentence,
     "identify_speed_table": identify_speed_table,
     "identify_sysid_table": identify_sysid_table,
+    "identify_sysid_sensors_table": identify_sysid_sensors_table,
+    "identify_capabilities_table": identify_capabilities_table,
     "overdamped_cost_table": overdamped_cost_table,
     "order4_table": order4_table,
     "float32_horizon_table": float32_horizon_table,
