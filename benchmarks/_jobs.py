@@ -323,8 +323,11 @@ JOBS = {
             "--png",
             "docs/mujoco_free_body_cpu.png",
         ),
-        40,
-        True,
+        # 581 CPU-s (user+sys) in a full run under heavy load (2026-11-29): its MuJoCo ladders ~340 (on
+        # both cores: ~3 min quiet), the paths ~50, jaxrot ~180 with 14 rungs past the 1 s cap that
+        # quiet cores would time (3 runs more each); about 7 min quiet, estimated. Its MuJoCo errors
+        # equal the published file's at every rung.
+        8,
         quick=(
             "benchmarks/mujoco_free_body.py",
             "--n",
@@ -336,7 +339,7 @@ JOBS = {
             "--json",
             "{tmp}/mujoco_free_body_cpu.json",
         ),
-        quick_minutes=8,
+        quick_minutes=3,  # jaxrot's ~90 compiles are most of it
         tables=("mujoco_free_body_speed",),
         sources=(*BASE, *VACUUM, "jaxrot/analytic.py", "benchmarks/mujoco_free_body.py"),
     ),
