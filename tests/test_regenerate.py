@@ -148,3 +148,17 @@ def test_plan_lists_each_job_with_its_time(capsys):
     regenerate.print_plan(["fluid_race", "memory"], quick=True)
     out = capsys.readouterr().out
     assert "2 job(s)" in out and "fluid_race" in out and "quick" in out and "memory" in out
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_the_race_jobs_sizing_replayed_on_the_published_race_gives_its_cells(dtype, capsys):
+    """race64/race32's caps (_jobs.RACE) and race.finalists, replayed on the published race file with its
+    own first-pass and re-timed seconds, pick the same row and ratio in every cell (issue 76: the
+    jobs were cut from 31.8 and 13.1 quiet minutes to about 9.5 and 4.5 on this evidence)."""
+    import race_replay
+    from _jobs import RACE
+
+    data = json.loads((Path(regenerate.DOCS) / "race_cpu" / f"race_{dtype}.json").read_text())
+    caps = {flag: float(RACE[RACE.index(flag) + 1]) for flag in ("--time-cap", "--adaptive-cap")}
+    _, changed = race_replay.replay(data, dtype, caps["--time-cap"], caps["--adaptive-cap"])
+    assert changed == 0, capsys.readouterr().out
