@@ -113,6 +113,26 @@ def test_gradients_through_the_graded_start_are_finite():
     assert abs(float(backward - forward)) <= 1e-9 * max(1.0, abs(float(backward)))
 
 
+@pytest.mark.slow  # reverse mode through the bounded loop: a minute's compile on 2 cores
+def test_gradients_through_the_graded_start_are_finite_where_nothing_turns():
+    """Torque-free in a fluid at rest, at rest or spinning about a principal axis: the slow velocity and
+    the forcing are exactly 0, where ``|S|`` and ``|N|^{1/2}`` of the start's sizing have no derivative
+    (``(Σx²)^{p/2}`` at 0: `_graded_start._root` gives it as 0). Before, the spinning body's gradient
+    was NaN (its start ran: ``v − N/L = u``)."""
+    fluid = jaxrot.Fluid(jnp.ones(3))
+
+    def final(omega, inertia):
+        traj = jaxrot.rollout(
+            "exp_rk4", jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), omega), inertia, 0.1, 3, fluid=fluid
+        )
+        return traj.q[-1].sum() + traj.omega[-1].sum()
+
+    grad = jax.jit(jax.grad(final, argnums=(0, 1)))
+    for omega in (jnp.zeros(3), jnp.array([0.0, 0.0, 1.0])):
+        leaves = jax.tree.leaves(grad(omega, jnp.array([1e-3, 2e-3, 3e-3])))
+        assert all(bool(jnp.all(jnp.isfinite(g))) for g in leaves), (omega, leaves)
+
+
 @pytest.mark.slow
 def test_graded_start_keeps_order_four_through_the_layer():
     """From rest at ζ/I = 1e3, hL from 250 down to 3.9: with the graded start every halving gains at

@@ -83,12 +83,24 @@ def _rates(rate):
     return jnp.min(rate), jnp.max(rate)
 
 
+def _root(x, power):
+    """``|x|^power`` with finite gradients at ``x = 0`` (a body at rest in a fluid at rest)."""
+    square = jnp.sum(x * x)
+    positive = square > 0
+    return jnp.where(positive, jnp.where(positive, square, 1.0) ** (power / 2), 0.0)
+
+
+def _slow_rate(carry):
+    """``ω = |S| + |N|^{1/2}``: the slow motion's rate, which sets the smooth steps' error ``∝ (ωh)⁴``."""
+    return _root(carry.slow, 1.0) + _root(carry.forcing, 0.5)
+
+
 def _first_substep(carry, dt, rate_min, rate_max):
     """``h min(r, c (ω/L_max) max(1, (θ/λ)^{1/4}))``: in proportion to the step at every ``L`` (no kink
     in ``h``); ``ω`` the slow motion's rate, ``|S| + |N|^{1/2}``, and ``λ`` the layer's turn
     (``carry.layer``, from `layer_turn` at `init`). Floored where the geometric mesh,
     ``5 L_max/(L_min L_max s₀)`` substeps, would not fit the loop's cap (with room for its tail)."""
-    omega = jnp.linalg.norm(carry.slow) + jnp.sqrt(jnp.linalg.norm(carry.forcing))
+    omega = _slow_rate(carry)
     turn = jnp.maximum(carry.layer, _LAYER_TURN / _COARSEST**4)
     coarsening = jnp.maximum(1.0, (_LAYER_TURN / turn) ** 0.25)
     floor = (1 / _GROWTH_EXPONENT) * (rate_max / rate_min) / (_MAX_SUBSTEPS - 64)
@@ -116,7 +128,7 @@ def layer_turn(carry, rate):
     adds to the slow motion's, of a forcing that changes by ``B ≈ ω |v − N/L|`` across it (``ω``, as
     in `_first_substep`, standing for ``|∂N/∂u|``) and decays within ``1/L``: ``∫∫ B e^{−Lτ} = B/L²``."""
     layer, _ = _deviation(carry, rate)
-    omega = jnp.linalg.norm(carry.slow) + jnp.sqrt(jnp.linalg.norm(carry.forcing))
+    omega = _slow_rate(carry)
     turn = omega * jnp.abs(layer).max() / jnp.min(rate) ** 2
     return jnp.where(off_manifold(carry, rate), turn, jnp.zeros_like(turn))
 
