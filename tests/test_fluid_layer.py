@@ -16,7 +16,7 @@ import pytest
 
 import jaxrot
 from jaxrot import quaternion as quat
-from jaxrot.schemes import ExpRK4
+from jaxrot.schemes import ExpRK4, _graded_start
 
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -31,8 +31,9 @@ def test_graded_start_can_be_turned_off():
 
 def test_graded_start_is_a_run_of_its_substeps():
     """The graded first step equals the same substeps taken one by one with `step`: the substep sizes
-    are ``s₀ e^{L_min (t − t0)/5}``, ``s₀ = dt min(1/3, ω/L_max)`` with ``ω = |S| + |N|^{1/2}`` at the
-    step's start, the last cut to end on the step (`jaxrot.schemes._graded_start`)."""
+    are ``s₀ e^{L_min (t − t0)/5}``, ``s₀ = dt min(1/3, (ω/L_max) max(1, (θ/λ)^{1/4}))`` with
+    ``ω = |S| + |N|^{1/2}`` at the step's start and ``λ`` the layer's turn (``carry.layer``), the last
+    cut to end on the step (`jaxrot.schemes._graded_start`)."""
     scheme = ExpRK4().in_fluid()
     run = fluid_layer.runner(ExpRK4(), 1e3)
     state = fluid_layer.start("off")
@@ -43,11 +44,12 @@ def test_graded_start_is_a_run_of_its_substeps():
         fluid_layer.FIELD, jaxrot._fluid._fluid.check_fluid(fluid_layer.fluid(), (), jnp.float64)[0]
     )
     carry = jax.jit(lambda s: scheme.init(s, 0.0, inertia, fluid_layer.torque, args))(state)
-    assert bool(carry.layer)  # at rest: off the slow manifold
+    assert float(carry.layer) > 0  # at rest: off the slow manifold
     # One compiled step for every substep (t and the size are runtime values).
     step = jax.jit(lambda c, t, size: scheme.step(c, t, size, inertia, fluid_layer.torque, args))
     omega = float(np.linalg.norm(carry.slow) + np.sqrt(np.linalg.norm(carry.forcing)))
-    first = dt * min(1 / 3, max(omega / 1e3, 1 / (256 * dt * 1e3)))
+    coarsening = max(1.0, (_graded_start._LAYER_TURN / float(carry.layer)) ** 0.25)
+    first = dt * min(1 / 3, max(coarsening * omega / 1e3, 5 / (960 * dt * 1e3)))
     t, sizes = 0.0, []
     while True:
         size = first * np.exp(1e3 * t / 5)
@@ -65,9 +67,9 @@ def test_graded_start_is_a_run_of_its_substeps():
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_graded_start_finite_far_into_the_stiff_limit(dtype):
-    """ζΔt/I = 1e8 and 1e12: the first step's substeps, about 5 (L_max/L_min)/(ω h) (12.5/(ω h) here),
-    fit the loop's cap of 256 (its last substep would take the rest); the body ends turning at the slow
-    velocity."""
+    """ζΔt/I = 1e8 and 1e12: the first step's substeps, about 5 (L_max/L_min)/(ω h max(1, (θ/λ)^{1/4}))
+    (a layer's turn λ ~ 1e-15 rad and less: a few), within the loop's cap of 1024 (whose last substep
+    would take the rest); the body ends turning at the slow velocity."""
     fluid = jaxrot.Fluid(fluid_layer.FRICTION.astype(dtype))
     # The slow velocity at t = 8 in one program, not one per eager operation.
     slow_velocity = jax.jit(
@@ -109,6 +111,26 @@ def test_gradients_through_the_graded_start_are_finite():
     backward, forward = both(jnp.asarray(1e3))
     assert bool(jnp.isfinite(backward)) and bool(jnp.isfinite(forward))
     assert abs(float(backward - forward)) <= 1e-9 * max(1.0, abs(float(backward)))
+
+
+@pytest.mark.slow  # reverse mode through the bounded loop: a minute's compile on 2 cores
+def test_gradients_through_the_graded_start_are_finite_where_nothing_turns():
+    """Torque-free in a fluid at rest, at rest or spinning about a principal axis: the slow velocity and
+    the forcing are exactly 0, where ``|S|`` and ``|N|^{1/2}`` of the start's sizing have no derivative
+    (``(Σx²)^{p/2}`` at 0: `_graded_start._root` gives it as 0). Before, the spinning body's gradient
+    was NaN (its start ran: ``v − N/L = u``)."""
+    fluid = jaxrot.Fluid(jnp.ones(3))
+
+    def final(omega, inertia):
+        traj = jaxrot.rollout(
+            "exp_rk4", jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), omega), inertia, 0.1, 3, fluid=fluid
+        )
+        return traj.q[-1].sum() + traj.omega[-1].sum()
+
+    grad = jax.jit(jax.grad(final, argnums=(0, 1)))
+    for omega in (jnp.zeros(3), jnp.array([0.0, 0.0, 1.0])):
+        leaves = jax.tree.leaves(grad(omega, jnp.array([1e-3, 2e-3, 3e-3])))
+        assert all(bool(jnp.all(jnp.isfinite(g))) for g in leaves), (omega, leaves)
 
 
 @pytest.mark.slow

@@ -69,8 +69,9 @@ class FluidCarry(NamedTuple):
         state: the `RotState` ``(q (4,), omega (3,))``, world ω.
         slow: the slow velocity ``S`` ``(3,)`` (body frame) at the state: the next step's first stage.
         forcing: ``N`` ``(3,)`` of equation (1) at the state: the next step's first stage.
-        layer: ``()`` bool, whether the body began its run off its slow manifold (`init`; the graded
-            start's decision, kept for the run), or None.
+        layer: ``()`` float, rad: the turn ``λ`` of the boundary layer the body began its run in, 0 if it
+            began on its slow manifold (`init`; the graded start's decision and the size of its
+            substeps, kept for the run: `jaxrot.schemes._graded_start`), or None.
     """
 
     state: RotState
@@ -161,7 +162,7 @@ class AbstractExponentialLieRK(AbstractScheme):
         carry = FluidCarry(RotState(q, omega), slow, forcing)
         if not self.graded_start:
             return carry
-        return carry._replace(layer=_graded_start.off_manifold(carry, fluid.friction * inertia.inverse))
+        return carry._replace(layer=_graded_start.layer_turn(carry, fluid.friction * inertia.inverse))
 
     def step(self, carry, t, dt, inertia, torque, args):
         if self.fluid:
