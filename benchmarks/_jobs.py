@@ -349,11 +349,14 @@ JOBS = {
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
     "thermal_orders": Job(
         ("thermal_orders.json",),
+        # 20000 bodies: at 8000 the splitting's dipole fit and baoab's ⟨I2 ω2²⟩ fits (docs/thermal.md
+        # quotes them) fall below noise, and ⟨cos θ⟩'s fits widen to ±0.12-0.13 against the ±0.3 band.
+        # CPU time (user + sys), 2026-11-29 under a load of ~15: 64 s at 2000 bodies, 134 s at 8000, so
+        # 41 s + 11.6 ms per body: 273 s at 20000, 2.3 min on 2 quiet cores (4.6 on one).
         ("benchmarks/thermal_orders.py", "--bodies", "20000"),
-        15,
-        True,
+        5,
         quick=("benchmarks/thermal_orders.py", "--bodies", "2000", "--out", "{tmp}/thermal_orders.json"),
-        quick_minutes=3,
+        quick_minutes=1,
         tables=("thermal_orders_table",),
         sources=(*BASE, *THERMAL, *FLUID, "benchmarks/thermal_orders.py"),
         timed=False,
@@ -416,10 +419,12 @@ JOBS = {
     "fluid_orders": Job(
         ("fluid_orders.json",),
         ("benchmarks/fluid_orders.py",),
-        12,
-        True,
+        # One program per scheme and torque for all seven Stokes numbers, one Dopri8 reference per
+        # Stokes number and torque for all schemes: 45 CPU-s in all (2026-11-29, load ~18), under a
+        # minute on 2 quiet cores.
+        1,
         quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
-        quick_minutes=3,
+        quick_minutes=0.5,
         tables=("fluid_orders_table",),
         sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/fluid_orders.py"),  # row "none": heavy_top
         timed=False,
@@ -427,7 +432,8 @@ JOBS = {
     "fluid_layer": Job(
         ("fluid_layer.json",),
         ("benchmarks/fluid_layer.py",),
-        8,
+        # 12 programs (scheme, start rule, rate), each reference once: 58 CPU-s (2026-11-29, load ~18).
+        1,
         sources=(*BASE, *FLUID, "benchmarks/fluid_layer.py", "benchmarks/_fluid_probe.py"),
         timed=False,
     ),
@@ -441,7 +447,7 @@ JOBS = {
         ("fluid_race_cpu.json", "fluid_race_cpu.png"),
         # One run per rung: the rows that can win a budget are re-timed round-robin (7 rounds) after
         # the ladders, which end once a rung is slower than 2x a row of its side that meets 1e-8.
-        ("benchmarks/fluid_race.py", "--repeats", "1"),
+        ("benchmarks/fluid_race.py", "--repeats", "1", "--max-steps", "4096"),
         60,
         True,
         quick=(

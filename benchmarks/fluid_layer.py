@@ -10,7 +10,7 @@ Dopri8 at 1e-13 with the fluid's torque as a plain callable, is recorded). Each 
 graded start (the default: `jaxrot.schemes._exponential`) and without (``graded_start=False``).
 Accuracy only, no timing:
 
-    python benchmarks/fluid_layer.py            # writes docs/fluid_layer.json (~3 min on 2 cores)
+    python benchmarks/fluid_layer.py            # writes docs/fluid_layer.json (~1 min on 2 cores)
     python benchmarks/fluid_layer.py --quick    # R = 1e3 only, to stdout
 """
 

@@ -12,7 +12,7 @@ computed and their distance is recorded). Row "none" runs without a fluid (ζ = 
 scene, reference Dopri8); the overdamped rows run `jaxrot.overdamped_rollout`'s schemes over one
 Jeffery period against RKMK4 at 16384 steps.
 
-    python benchmarks/fluid_orders.py                # writes docs/fluid_orders.json (~10 min on 2 cores)
+    python benchmarks/fluid_orders.py                # writes docs/fluid_orders.json (~1 min on 2 cores)
     python benchmarks/fluid_orders.py --quick        # a smaller table to stdout (written only with --out)
 """
 
