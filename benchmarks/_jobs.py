@@ -364,9 +364,11 @@ JOBS = {
     # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
     "thermal_peers": Job(
         ("thermal_peers.json",),
+        # Sized as it was: 16384 bodies keep the biases' 2σ (~0.006) inside the cost table's 0.01 budget.
+        # Under Python 3.12 with jax_md, 2026-11-29 (load ~17): the 16 bias rows 142 CPU-s, the run
+        # ~240 (see the report of branch jobs-fluid): 2-4 min on 2 quiet cores, compile-bound.
         ("benchmarks/thermal_peers.py", "--timing"),
-        25,
-        True,
+        5,
         quick=(
             "benchmarks/thermal_peers.py",
             "--bodies",
@@ -375,7 +377,7 @@ JOBS = {
             "--out",
             "{tmp}/thermal_peers.json",
         ),
-        quick_minutes=8,
+        quick_minutes=2,
         tables=("thermal_peers_table",),
         sources=(*BASE, *THERMAL, *FLUID, *DIFFRAX, "benchmarks/thermal_peers.py"),
     ),
@@ -445,11 +447,14 @@ JOBS = {
     ),
     "fluid_race": Job(
         ("fluid_race_cpu.json", "fluid_race_cpu.png"),
-        # One run per rung: the rows that can win a budget are re-timed round-robin (7 rounds) after
-        # the ladders, which end once a rung is slower than 2x a row of its side that meets 1e-8.
-        ("benchmarks/fluid_race.py", "--repeats", "1", "--max-steps", "4096"),
-        60,
-        True,
+        # One run per rung; a ladder ends past 2 s a run (8 s diffrax's) or 2x a row of its side that
+        # meets 1e-8; the rows that can win a budget are re-timed round-robin, up to 7 rounds and 2 s
+        # each; diffrax's step budget is its default, 4096. Replayed on the 2026-11-27 file's rows,
+        # these rules keep every budget's fastest row on both sides and leave 6.4 min of runs (46.6
+        # before: 4 runs a rung, 7 rounds of ~19-30 finalists, Kvaerno5 failing at 16384 steps), plus
+        # ~3.5 min of compilation (St = 0.1 measured: 195 CPU-s with the runs, 2026-11-29, load ~17).
+        ("benchmarks/fluid_race.py", "--repeats", "1", "--time-cap", "2", "--max-steps", "4096"),
+        10,
         quick=(
             "benchmarks/fluid_race.py",
             "--n",
@@ -463,7 +468,7 @@ JOBS = {
             "--out",
             "{tmp}",
         ),
-        quick_minutes=8,
+        quick_minutes=3,
         tables=("fluid_race_table",),
         sources=(
             *BASE,

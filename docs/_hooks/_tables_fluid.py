@@ -135,7 +135,9 @@ def fluid_race_notes(docs, name="fluid_race_cpu.json"):
             parts.append(f"reference within {_sig(run['reference_vs_dopri8'], 2)} rad of Dopri8")
         if run.get("rounds_spread") is not None:  # files from 2026-11-29 on
             rounds = data["options"]["rounds"]
-            parts.append(f"the re-timed rows' {rounds} rounds spread {run['rounds_spread']:.0%} (median)")
+            parts.append(
+                f"the re-timed rows' rounds (up to {rounds}) spread {run['rounds_spread']:.0%} (median)"
+            )
         lines.append(f"- St = {run['stokes']:.0e}: " + "; ".join(parts) + ".")
     return "\n".join(lines)
 
