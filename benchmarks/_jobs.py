@@ -365,8 +365,8 @@ JOBS = {
     "thermal_peers": Job(
         ("thermal_peers.json",),
         # Sized as it was: 16384 bodies keep the biases' 2σ (~0.006) inside the cost table's 0.01 budget.
-        # Python 3.12 with jax_md, 2026-11-29 (load ~17): the 16 bias rows and jax_md's diagnosis took
-        # 142 CPU-s, 173 up to jax_md's cost row; diffrax's cost row adds ~4 runs of 11.5 s (4.5 us a
+        # Python 3.12 with jax_md, 2026-11-29 (load ~17): the 16 bias rows took 142 CPU-s, 173 with
+        # jax_md's diagnosis and jaxrot's cost rows; diffrax's cost row adds ~4 runs of 11.5 s (4.5 us a
         # body-step, 10^4 bodies, 256 steps): ~230 CPU-s, 2-4 min on 2 quiet cores (25 listed before).
         ("benchmarks/thermal_peers.py", "--timing"),
         5,
