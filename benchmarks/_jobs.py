@@ -365,9 +365,8 @@ JOBS = {
     "thermal_peers": Job(
         ("thermal_peers.json",),
         # Sized as it was: 16384 bodies keep the biases' 2σ (~0.006) inside the cost table's 0.01 budget.
-        # Python 3.12 with jax_md, 2026-11-29 (load ~17): the 16 bias rows took 142 CPU-s, 173 with
-        # jax_md's diagnosis and jaxrot's cost rows; diffrax's cost row adds ~4 runs of 11.5 s (4.5 us a
-        # body-step, 10^4 bodies, 256 steps): ~230 CPU-s, 2-4 min on 2 quiet cores (25 listed before).
+        # Python 3.12 with jax_md, 2026-11-29 (load ~17): 230 CPU-s in all (the 16 bias rows 142), so
+        # 2-4 min on 2 quiet cores (25 were listed).
         ("benchmarks/thermal_peers.py", "--timing"),
         5,
         quick=(
