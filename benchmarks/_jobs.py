@@ -370,11 +370,14 @@ JOBS = {
     # Accuracy only (weak orders of the thermal schemes): no timing, any machine; long on 2 cores.
     "thermal_orders": Job(
         ("thermal_orders.json",),
+        # 20000 bodies: at 8000 the splitting's dipole fit and baoab's ⟨I2 ω2²⟩ fits (docs/thermal.md
+        # quotes them) fall below noise, and ⟨cos θ⟩'s fits widen to ±0.12-0.13 against the ±0.3 band.
+        # CPU time (user + sys), 2026-11-29 under a load of ~15: 64 s at 2000 bodies, 134 s at 8000, so
+        # 41 s + 11.6 ms per body: 273 s at 20000, 2.3 min on 2 quiet cores (4.6 on one).
         ("benchmarks/thermal_orders.py", "--bodies", "20000"),
-        15,
-        True,
+        5,
         quick=("benchmarks/thermal_orders.py", "--bodies", "2000", "--out", "{tmp}/thermal_orders.json"),
-        quick_minutes=3,
+        quick_minutes=1,
         tables=("thermal_orders_table",),
         sources=(*BASE, *THERMAL, *FLUID, "benchmarks/thermal_orders.py"),
         timed=False,
@@ -382,9 +385,11 @@ JOBS = {
     # Biases against dt and, timed, the cost per body-step against jax_md (Python 3.12) and diffrax.
     "thermal_peers": Job(
         ("thermal_peers.json",),
+        # Sized as it was: 16384 bodies keep the biases' 2σ (~0.006) inside the cost table's 0.01 budget.
+        # Python 3.12 with jax_md, 2026-11-29 (load ~17): 230 CPU-s in all (the 16 bias rows 142), so
+        # 2-4 min on 2 quiet cores (25 were listed).
         ("benchmarks/thermal_peers.py", "--timing"),
-        25,
-        True,
+        5,
         quick=(
             "benchmarks/thermal_peers.py",
             "--bodies",
@@ -393,7 +398,7 @@ JOBS = {
             "--out",
             "{tmp}/thermal_peers.json",
         ),
-        quick_minutes=8,
+        quick_minutes=2,
         tables=("thermal_peers_table",),
         sources=(*BASE, *THERMAL, *FLUID, *DIFFRAX, "benchmarks/thermal_peers.py"),
     ),
@@ -416,7 +421,9 @@ JOBS = {
     "jax_md_brownian": Job(
         ("jax_md_brownian.json",),
         ("benchmarks/jax_md_brownian.py",),
-        6,
+        # One program for the three dipole fields (was three): 244 CPU-s in all, 2026-11-29 (load ~17),
+        # the file's numbers unchanged to the last digit: 2-4 min on 2 quiet cores.
+        4,
         quick=("benchmarks/jax_md_brownian.py", "--quick", "--out", "{tmp}/jax_md_brownian.json"),
         quick_minutes=1,
         sources=JAX_MD + ("benchmarks/jax_md_brownian.py",),
@@ -438,10 +445,12 @@ JOBS = {
     "fluid_orders": Job(
         ("fluid_orders.json",),
         ("benchmarks/fluid_orders.py",),
-        12,
-        True,
+        # One program per scheme and torque for all seven Stokes numbers, one Dopri8 reference per
+        # Stokes number and torque for all schemes: 45 CPU-s in all (2026-11-29, load ~18), under a
+        # minute on 2 quiet cores.
+        1,
         quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
-        quick_minutes=3,
+        quick_minutes=0.5,
         tables=("fluid_orders_table",),
         sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/fluid_orders.py"),  # row "none": heavy_top
         timed=False,
@@ -449,8 +458,9 @@ JOBS = {
     "fluid_layer": Job(
         ("fluid_layer.json",),
         ("benchmarks/fluid_layer.py",),
-        8,
-        sources=(*BASE, *FLUID, "benchmarks/fluid_layer.py"),
+        # 12 programs (scheme, start rule, rate), each reference once: 58 CPU-s (2026-11-29, load ~18).
+        1,
+        sources=(*BASE, *FLUID, "benchmarks/fluid_layer.py", "benchmarks/_fluid_probe.py"),
         timed=False,
     ),
     "overdamped_cost": Job(
@@ -461,9 +471,14 @@ JOBS = {
     ),
     "fluid_race": Job(
         ("fluid_race_cpu.json", "fluid_race_cpu.png"),
-        ("benchmarks/fluid_race.py",),
-        60,
-        True,
+        # One run per rung; a ladder ends past 2 s a run (8 s diffrax's) or 2x a row of its side that
+        # meets 1e-8; the rows that can win a budget are re-timed round-robin, up to 7 rounds and 2 s
+        # each; diffrax's step budget is its default, 4096. Replayed on the 2026-11-27 file's rows,
+        # these rules keep every budget's fastest row on both sides and leave 6.4 min of runs (46.6
+        # before: 4 runs a rung, 7 rounds of ~19-30 finalists, Kvaerno5 failing at 16384 steps), plus
+        # ~3.5 min of compilation (St = 0.1 measured: 195 CPU-s with the runs, 2026-11-29, load ~17).
+        ("benchmarks/fluid_race.py", "--repeats", "1", "--time-cap", "2", "--max-steps", "4096"),
+        10,
         quick=(
             "benchmarks/fluid_race.py",
             "--n",
@@ -477,9 +492,18 @@ JOBS = {
             "--out",
             "{tmp}",
         ),
-        quick_minutes=8,
+        quick_minutes=3,
         tables=("fluid_race_table",),
-        sources=(*BASE, *VACUUM, *FLUID, *DIFFRAX, *SCENES, "benchmarks/fluid_race.py", "benchmarks/race.py"),
+        sources=(
+            *BASE,
+            *VACUUM,
+            *FLUID,
+            *DIFFRAX,
+            *SCENES,
+            "benchmarks/fluid_race.py",
+            "benchmarks/_fluid_race_runners.py",
+            "benchmarks/race.py",
+        ),
     ),
     # One exponential step in the race's fluid against a Lie-group Runge-Kutta step with the same physics
     # as a torque (docs/fluid.md).

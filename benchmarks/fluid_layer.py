@@ -10,11 +10,12 @@ Dopri8 at 1e-13 with the fluid's torque as a plain callable, is recorded). Each 
 graded start (the default: `jaxrot.schemes._exponential`) and without (``graded_start=False``).
 Accuracy only, no timing:
 
-    python benchmarks/fluid_layer.py            # writes docs/fluid_layer.json (~3 min on 2 cores)
+    python benchmarks/fluid_layer.py            # writes docs/fluid_layer.json (~1 min on 2 cores)
     python benchmarks/fluid_layer.py --quick    # R = 1e3 only, to stdout
 """
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -67,12 +68,20 @@ def runner(scheme, rate):
     return final_orientation_runner(scheme, jaxrot.body_inertia(FRICTION / rate), torque, args)
 
 
+@functools.cache  # one compiled program per scheme, start rule and rate, shared by both starts
+def scheme_runner(name, graded, rate):
+    return runner(type(FLUID_SCHEMES[name])(graded_start=graded), rate)
+
+
+@functools.cache  # the graded run at a 16th of the finest step: one per scheme, rate and start
+def reference(name, rate, kind):
+    return scheme_runner(name, True, rate)(start(kind), T_END / (REFINE * STEPS[-1]), REFINE * STEPS[-1])
+
+
 def ladder(name, rate, graded, kind):
-    cls = type(FLUID_SCHEMES[name])
     state = start(kind)
-    reference = runner(cls(), rate)(state, T_END / (REFINE * STEPS[-1]), REFINE * STEPS[-1])
-    run = runner(cls(graded_start=graded), rate)
-    errors = [float(quat.angle_between(run(state, T_END / n, n), reference)) for n in STEPS]
+    run = scheme_runner(name, graded, rate)
+    errors = [float(quat.angle_between(run(state, T_END / n, n), reference(name, rate, kind))) for n in STEPS]
     return {
         "scheme": name,
         "rate": rate,
@@ -87,7 +96,7 @@ def ladder(name, rate, graded, kind):
 def reference_gap(name, rate, kind):
     """Distance of the fine reference to Dopri8 (1e-13) with the fluid's torque as a plain callable."""
     state = start(kind)
-    fine = runner(FLUID_SCHEMES[name], rate)(state, T_END / (REFINE * STEPS[-1]), REFINE * STEPS[-1])
+    fine = reference(name, rate, kind)
 
     def plain(t, q, omega, args):
         return fluid().torque(q, omega) + torque(t, q, omega, args)

@@ -12,11 +12,12 @@ computed and their distance is recorded). Row "none" runs without a fluid (ζ = 
 scene, reference Dopri8); the overdamped rows run `jaxrot.overdamped_rollout`'s schemes over one
 Jeffery period against RKMK4 at 16384 steps.
 
-    python benchmarks/fluid_orders.py                # writes docs/fluid_orders.json (~10 min on 2 cores)
+    python benchmarks/fluid_orders.py                # writes docs/fluid_orders.json (~1 min on 2 cores)
     python benchmarks/fluid_orders.py --quick        # a smaller table to stdout (written only with --out)
 """
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -60,6 +61,7 @@ def magnetic_torque(t, q, omega, args):
     return jnp.cross(args["moment"] * quat.rotate(q, jnp.array([0.0, 0.0, 1.0])), args["field"])
 
 
+@functools.cache  # one function per torque: reference_rollout's compiled program is reused
 def plain_torque(with_magnet):
     def torque(t, q, omega, args):
         tau = fluid().torque(q, omega)
@@ -83,6 +85,39 @@ def runner(scheme, body_inertia, torque, args, fluid_values):
     return run
 
 
+@functools.cache
+def fluid_runner(name, with_magnet):
+    """``run(state, moments, args, fluid_values, dt, n) -> q``: the scheme in the fluid, one compilation
+    for every Stokes number (the moments, the torque's arguments, dt and n are runtime values)."""
+    scheme = jaxrot.FLUID_SCHEMES[name].in_fluid()
+    torque = magnetic_torque if with_magnet else None
+
+    @jax.jit
+    def run(state, moments, args, fluid_values, dt, n):
+        body_inertia, args = jaxrot.body_inertia(moments), FluidArgs(args, fluid_values)
+        carry = scheme.init(state, jnp.zeros(()), body_inertia, torque, args)
+        step = lambda i, c: scheme.step(c, i * dt, dt, body_inertia, torque, args)  # noqa: E731
+        return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
+
+    return run
+
+
+@functools.cache
+def dopri8_reference(stokes, with_magnet):
+    """The final orientation by `jaxrot.reference_rollout` (Dopri8, 1e-13), shared by every scheme."""
+    body, args = inertia(stokes), (MAGNET if with_magnet else None)
+    return jaxrot.reference_rollout(
+        start(with_magnet), body, jnp.array([0.0, T_END]), torque=plain_torque(with_magnet), args=args,
+        rtol=1e-13, atol=1e-13, max_steps=10**7,
+    ).q[-1]  # fmt: skip
+
+
+def start(with_magnet):
+    """On the slow manifold: turning at the overdamped angular velocity."""
+    tau0 = magnetic_torque(0.0, Q0, None, MAGNET) if with_magnet else None
+    return jaxrot.RotState(Q0, fluid().angular_velocity(Q0, tau0))
+
+
 def fit(steps, errors, t_end):
     dts = t_end / np.asarray(steps)
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0])
@@ -91,20 +126,16 @@ def fit(steps, errors, t_end):
 def fluid_row(name, stokes, with_magnet, levels):
     scheme = jaxrot.FLUID_SCHEMES[name]
     body = inertia(stokes)
-    torque, args = (magnetic_torque, MAGNET) if with_magnet else (None, None)
-    tau0 = None if torque is None else torque(0.0, Q0, None, args)
-    state = jaxrot.RotState(Q0, fluid().angular_velocity(Q0, tau0))
+    state = start(with_magnet)
     values, _ = check_fluid(fluid(), (), jnp.float64)
-    run = runner(scheme, body, torque, args, values)
+    compiled = fluid_runner(name, with_magnet)
+    run = lambda state, dt, n: compiled(state, body, MAGNET if with_magnet else None, values, dt, n)  # noqa: E731
     first = 16 if scheme.order >= 4 else 32
     steps = [first * 2**k for k in range(levels)]
     fine = run(state, T_END / (16 * steps[-1]), 16 * steps[-1])
     reference, source, gap = fine, "same scheme, 16x finer", None
     if stokes >= 1e-3:
-        dopri = jaxrot.reference_rollout(
-            state, body, jnp.array([0.0, T_END]), torque=plain_torque(with_magnet), args=args,
-            rtol=1e-13, atol=1e-13, max_steps=10**7,
-        ).q[-1]  # fmt: skip
+        dopri = dopri8_reference(stokes, with_magnet)
         gap = float(quat.angle_between(dopri, fine))
         reference, source = dopri, "reference_rollout (Dopri8, 1e-13)"
     errors = [float(quat.angle_between(run(state, T_END / n, n), reference)) for n in steps]

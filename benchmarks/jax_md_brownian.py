@@ -87,29 +87,28 @@ def free_rows(n):
     return rows
 
 
+def dipole_energy(position, field, **kwargs):
+    axis = rigid_body.quaternion_rotate(position.orientation, jnp.array([1.0, 0.0, 0.0]))
+    return -field * jnp.sum(axis[:, 2])
+
+
 def dipole_rows(n):
     rows = []
+    _, shift, body = free_system(n)
+    init_fn, apply_fn = jm.brownian(dipole_energy, shift, DIPOLE_DT, KT, 1.0)
+
+    @jax.jit  # one program for every field: the field reaches the energy as apply_fn's keyword
+    def run(state, field):
+        def snapshot(s, _):
+            s = jax.lax.fori_loop(0, 50, lambda i, s_: apply_fn(s_, field=field), s)
+            return s, rigid_body.quaternion_rotate(s.position.orientation, jnp.array([1.0, 0.0, 0.0]))[:, 2]
+
+        state, _ = jax.lax.scan(snapshot, state, None, length=4)
+        return jax.lax.scan(snapshot, state, None, length=8)[1]
+
     for field in FIELDS:
-
-        def energy_fn(position, field=field, **kwargs):
-            axis = rigid_body.quaternion_rotate(position.orientation, jnp.array([1.0, 0.0, 0.0]))
-            return -field * jnp.sum(axis[:, 2])
-
-        _, shift, body = free_system(n)
-        init_fn, apply_fn = jm.brownian(energy_fn, shift, DIPOLE_DT, KT, 1.0)
-
-        @jax.jit
-        def run(state, apply_fn=apply_fn):
-            def snapshot(s, _):
-                s = jax.lax.fori_loop(0, 50, lambda i, s_: apply_fn(s_), s)
-                return s, rigid_body.quaternion_rotate(s.position.orientation, jnp.array([1.0, 0.0, 0.0]))[
-                    :, 2
-                ]
-
-            state, _ = jax.lax.scan(snapshot, state, None, length=4)
-            return jax.lax.scan(snapshot, state, None, length=8)[1]
-
-        per_body = np.asarray(run(init_fn(jax.random.key(3), body, mass=shape().mass()))).mean(axis=0)
+        start = init_fn(jax.random.key(3), body, mass=shape().mass())
+        per_body = np.asarray(run(start, jnp.asarray(field))).mean(axis=0)
         expected = 1 / np.tanh(field / KT) - KT / field
         error = float(per_body.std(ddof=1) / np.sqrt(n))
         row = {"field_over_kT": field, "bodies": n, "dt": DIPOLE_DT, "cos": float(per_body.mean()),

@@ -19,7 +19,7 @@ order sets in (the fit over every level mixes in the coarse, pre-asymptotic ones
   the Brownian schemes; a triaxial Langevin body (inertia (1, 2, 3), friction 2), whose correlation
   has no closed form: there the limit of each scheme is recorded (the two schemes must agree).
 
-    python benchmarks/thermal_orders.py --bodies 20000   # the published file: about 15 min on 2 cores
+    python benchmarks/thermal_orders.py --bodies 20000   # the published file: about 5 min on 2 cores
     python benchmarks/thermal_orders.py                  # 2**21 bodies: for a GPU
     python benchmarks/thermal_orders.py --quick          # 2000 bodies, to stdout, nothing written
     python benchmarks/thermal_orders.py --bodies 2097152 --schemes baoab --cases "dipole,dipole ζ=1" \

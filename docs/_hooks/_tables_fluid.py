@@ -133,6 +133,11 @@ def fluid_race_notes(docs, name="fluid_race_cpu.json"):
             parts.append(f"`{method}` not reached at tol {tol:.0e} ({bodies} bodies past its step budget)")
         if run["reference_vs_dopri8"] is not None:
             parts.append(f"reference within {_sig(run['reference_vs_dopri8'], 2)} rad of Dopri8")
+        if run.get("rounds_spread") is not None:  # files from 2026-11-29 on
+            rounds = data["options"]["rounds"]
+            parts.append(
+                f"the re-timed rows' rounds (up to {rounds}) spread {run['rounds_spread']:.0%} (median)"
+            )
         lines.append(f"- St = {run['stokes']:.0e}: " + "; ".join(parts) + ".")
     return "\n".join(lines)
 
