@@ -53,6 +53,14 @@ import diffrax
 import jax.numpy as jnp
 import numpy as np
 from _fluid_race_runners import bodies, diffrax_runner, explicit_runner  # noqa: E402 (benchmarks/)
+from _fluid_race_tables import (  # noqa: E402 (benchmarks/)
+    BUDGETS,
+    DIFFRAX,
+    budget_table,
+    is_diffrax,
+    overdamped_floor,
+    plot,
+)
 from race import seconds_of_one_run as seconds_of, step_ladder  # noqa: E402 (benchmarks/)
 
 import jaxrot
@@ -65,8 +73,6 @@ from jaxrot.schemes import OVERDAMPED_SCHEMES, ExpRK4
 
 ROOT = Path(__file__).resolve().parents[1]
 STOKES = (1e-1, 1e-3, 1e-5)
-BUDGETS = [10.0**-k for k in range(2, 9)]
-DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_kvaerno5": diffrax.Kvaerno5, "diffrax_kencarp4": None}
 REFERENCE_STEPS = 2**14
 RERUN = "_rerun"
 
@@ -254,10 +260,6 @@ def race_one(stokes, n, repeats, time_cap, floor, max_steps, quick, band, log):
     return rows, check, {"not_raced": skipped, "failed": rows_failed}, ref_steps, compile_seconds
 
 
-def is_diffrax(row):
-    return row["method"] in DIFFRAX
-
-
 def finalists(rows, band):
     """Per budget and side, each method's fastest row that meets it, where within ``band`` times the
     side's fastest: the rows one ladder timing cannot rank (``band``: that timing's spread, see
@@ -302,58 +304,6 @@ def retime(rows, rounds, band, time_cap, log):
     shown = "—" if spread is None else f"{spread:.0%}"
     log(f"  re-timed {len(final)} finalists side by side, up to {rounds} rounds (median spread {shown})")
     return spread
-
-
-def label(row):
-    if row is None:
-        return None
-    setting = f"{row['n_steps']} steps" if row["kind"] == "fixed" else f"tol {row['tol']:.0e}"
-    return f"{row['method']} {setting} {row['seconds'] * 1e3:.3g} ms"
-
-
-def budget_table(rows):
-    table = []
-    for budget in BUDGETS:
-        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
-        ours = min((r for r in ok if not is_diffrax(r)), key=lambda r: r["seconds"], default=None)
-        theirs = min((r for r in ok if is_diffrax(r)), key=lambda r: r["seconds"], default=None)
-        ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
-        table.append({"budget": budget, "jaxrot": label(ours), "diffrax": label(theirs), "ratio": ratio})
-    return table
-
-
-def overdamped_floor(rows):
-    """The smallest error any overdamped row reached: below it the model's own error disqualifies it."""
-    errors = [r["max_orientation_error_rad"] for r in rows if r["model"] == "overdamped"]
-    return min(errors) if errors else None
-
-
-def plot(report, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    runs = report["runs"]
-    fig, axes = plt.subplots(
-        1, len(runs), figsize=(5.2 * len(runs), 4.2), constrained_layout=True, squeeze=False
-    )
-    for ax, run in zip(axes[0], runs, strict=True):
-        rows = run["rows"]
-        for name in dict.fromkeys(r["method"] for r in rows):
-            mine = [r for r in rows if r["method"] == name]
-            style = {"linestyle": "--", "marker": "s"} if mine[0]["kind"] == "adaptive" else {"marker": "o"}
-            ax.loglog(
-                [r["seconds"] * 1e3 for r in mine],
-                [r["max_orientation_error_rad"] for r in mine],
-                label=name,
-                **style,
-            )
-        ax.set(title=f"St = {run['stokes']:g}", xlabel="wall time [ms]", ylabel="max orientation error [rad]")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize="x-small")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main(argv=None):

@@ -36,10 +36,8 @@ timings (each row timed minutes apart from the others) and writes it with ``"ret
 """
 
 import argparse
-import ast
 import json
 import math
-import re
 import statistics
 import time
 from pathlib import Path
@@ -52,6 +50,16 @@ jax.config.update("jax_enable_x64", True)
 import diffrax
 import jax.numpy as jnp
 import numpy as np
+from _race_tables import (  # noqa: E402 (benchmarks/)
+    BUDGETS,
+    DIFFRAX,
+    _is_diffrax,
+    _seconds,
+    _table_json,
+    format_race,
+    race_table,
+    table_from_log,
+)
 
 import jaxrot
 import jaxrot._core._fusion
@@ -62,14 +70,12 @@ from jaxrot._particles import PARTICLES
 from jaxrot.comparison import machine_info, plot_work_precision
 
 
-DIFFRAX = {"diffrax_tsit5": diffrax.Tsit5, "diffrax_dopri5": diffrax.Dopri5, "diffrax_dopri8": diffrax.Dopri8}
 # jaxrot's Lie-group pairs with diffrax's PID controller (`jaxrot.solver`): each body adapts its own steps.
 LIE_ADAPTIVE = ("rkmk_dopri5", "rkmk_dopri8")
 # Fixed-step variants of registered schemes, raced as rows of their own.
 VARIANTS = {"rkmk_dopri8_cayley": jaxrot.schemes.RKMKDopri8(chart="cayley")}
 # A row's key for the compiled program and arguments that reproduce its run (not saved).
 RERUN = "_rerun"
-BUDGETS = {"float64": [10.0**-k for k in range(2, 11)], "float32": [10.0**-k for k in range(2, 6)]}
 REFERENCE_TOL = 1e-14
 # A finalist is at most this much slower, on the ladder, than its side's fastest row at the budget.
 # In the published race (float64 and float32, three scenes each, 2026-11-26/27) each budget's winner
@@ -323,90 +329,6 @@ def retime_side_by_side(rows, budgets, rounds=7, log=print):
         r["seconds"] = statistics.median(samples[id(r)])
         r["us_per_particle_run"] = r["seconds"] / r["particles"] * 1e6
     log(f"  re-timed {len(final)} finalists side by side, {rounds} rounds")
-
-
-def race_table(rows, budgets):
-    """``[(budget, fastest jaxrot row, fastest diffrax row, ratio)]``; ratio > 1 means jaxrot is faster."""
-    table = []
-    for budget in budgets:
-        ok = [r for r in rows if r["max_orientation_error_rad"] <= budget]
-        ours = min((r for r in ok if not _is_diffrax(r)), key=_seconds, default=None)
-        theirs = min((r for r in ok if _is_diffrax(r)), key=_seconds, default=None)
-        ratio = theirs["seconds"] / ours["seconds"] if ours and theirs else None
-        table.append((budget, ours, theirs, ratio))
-    return table
-
-
-def _seconds(row):
-    return row["seconds"]
-
-
-def _is_diffrax(row):
-    return row["method"] in DIFFRAX
-
-
-def _label(row):
-    if row is None:
-        return "none"
-    setting = f"{row['n_steps']} steps" if row["kind"] == "fixed" else f"tol {row['tol']:.0e}"
-    return f"{row['method']} {setting} {row['seconds'] * 1e3:.3g} ms"
-
-
-def _table_json(table):
-    """`race_table`'s rows as the results file stores them (rows named by `_label`)."""
-    return [
-        {"budget": b, "jaxrot": o and _label(o), "diffrax": d and _label(d), "ratio": r}
-        for b, o, d, r in table
-    ]
-
-
-def format_race(scene_name, dtype, table):
-    lines = [
-        f"### {scene_name}, {dtype}",
-        "| budget [rad] | fastest jaxrot | fastest diffrax | diffrax time / jaxrot time |",
-        "|---|---|---|---|",
-    ]
-    for budget, ours, theirs, ratio in table:
-        r = "—" if ratio is None else f"{ratio:.2f}"
-        lines.append(f"| {budget:.0e} | {_label(ours)} | {_label(theirs)} | {r} |")
-    return "\n".join(lines)
-
-
-_LADDER_ROW = re.compile(
-    r"^  (?P<method>\S+)\s+(?:steps\s+(?P<steps>\d+)|tol\s+(?P<tol>\S+)\s+steps\s+(?P<mean>\S+))"
-    r"\s+err\s+(?P<err>\S+)\s+(?P<ms>\S+) ms$"
-)
-
-
-def rows_from_log(lines):
-    """``{scene: rows}`` of the ladder lines that `race` logged (error and first-pass time only)."""
-    scenes, rows = {}, None
-    for line in lines:
-        if line.startswith("== ") and "N = " in line:
-            rows = scenes.setdefault(line[3:].split(" (")[0], [])
-        elif rows is not None and (match := _LADDER_ROW.match(line)):
-            fixed = match["steps"] is not None
-            rows.append(
-                {"method": match["method"], "kind": "fixed" if fixed else "adaptive",
-                 "tol": None if fixed else float(match["tol"]),
-                 "n_steps": int(match["steps"]) if fixed else int(round(float(match["mean"]))),
-                 "max_orientation_error_rad": float(match["err"]), "seconds": float(match["ms"]) / 1e3}
-            )  # fmt: skip
-    return scenes
-
-
-def table_from_log(log_path, dtype, out):
-    """Print and write (``out/race_DTYPE_firstpass.json``) the race tables rebuilt from a log."""
-    lines = Path(log_path).read_text().splitlines()
-    prefix = "machine: "
-    machine = next(ast.literal_eval(line[len(prefix) :]) for line in lines if line.startswith(prefix))
-    report = {"machine": machine, "source": str(log_path), "retimed": False, "scenes": {}}
-    for scene_name, rows in rows_from_log(lines).items():
-        table = race_table(rows, BUDGETS[dtype])
-        print(format_race(scene_name, dtype, table) + "\n(first-pass timings, not re-timed side by side)")
-        report["scenes"][scene_name] = {"rows": rows, "table": _table_json(table)}
-    with open(Path(out) / f"race_{dtype}_firstpass.json", "w") as f:
-        json.dump(report, f, indent=2)
 
 
 def main():
