@@ -308,13 +308,16 @@ def _polar_factor(m):
     smooth: gradients are finite at exact rotations. ``(γX)⁻ᵀ`` is the cofactor
     matrix over the determinant: the columns' cross products.
     """
-    for _ in range(_POLAR_STEPS):
+
+    def newton(_, m):
         a, b, c = m[..., :, 0], m[..., :, 1], m[..., :, 2]
         cofactor = jnp.stack([jnp.cross(b, c), jnp.cross(c, a), jnp.cross(a, b)], axis=-1)
         det = jnp.sum(a * cofactor[..., :, 0], axis=-1)[..., None, None]
         gamma = jnp.cbrt(det) ** -1
-        m = 0.5 * (gamma * m + cofactor / (gamma * det))
-    return m
+        return 0.5 * (gamma * m + cofactor / (gamma * det))
+
+    # A loop, not eight unrolled copies: its derivatives' programs compile several times faster.
+    return jax.lax.fori_loop(0, _POLAR_STEPS, newton, m)
 
 
 def from_matrix(m, *, tol=MATRIX_TOL):
@@ -360,6 +363,15 @@ def from_matrix(m, *, tol=MATRIX_TOL):
     if not jnp.issubdtype(m.dtype, jnp.floating):
         m = m.astype(jnp.result_type(float))
     _check_rotation_matrix(m, tol)
+    return _project(m)
+
+
+@jax.jit
+def _project(m):
+    """`from_matrix` after its checks, ``(..., 3, 3)`` → ``(..., 4)``. One compiled program per shape and
+    dtype: called eagerly, its ~50 operations (the polar iteration, Shepperd's branches) would each
+    compile one of their own, about as long as the whole program (measured per call of
+    tests/test_from_matrix.py: ~50 programs before, 1 after). Inside a caller's ``jit`` it is inlined."""
     det = jnp.sum(m[..., :, 0] * jnp.cross(m[..., :, 1], m[..., :, 2]), axis=-1)[..., None, None]
     m = jnp.where(det > 0, m, jnp.nan)
     return normalize(_from_orthogonal_matrix(_polar_factor(m)))

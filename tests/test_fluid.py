@@ -420,7 +420,9 @@ def test_fluid_rollouts_per_body_and_in_chunks(default_emitters):
     """Per-body frictions (the particle axes in front, and `jaxrot.per_body`) give each body its own
     run, and chunks are the one call bit for bit: a promise about the programs users compile, so with
     XLA's default emitters (the suite's faster-compiling loop emitters fused the per-body and shared
-    programs differently: 1 ulp apart on a 2-core EPYC)."""
+    programs differently: 1 ulp apart on a 2-core EPYC). Each body's own run: the same bodies in the
+    reverse order, the same program (frictions are data), give each body the same run; a friction
+    taken from another body, or from another axis, would move it."""
     aspects = jnp.array([2.0, 4.0, 0.5])
     fluid = jaxrot.Fluid.spheroid(aspects, 1.0, 1.0, velocity_gradient=SHEAR)
     marked = jaxrot.Fluid.spheroid(jaxrot.per_body(aspects), 1.0, 1.0, velocity_gradient=SHEAR)
@@ -432,11 +434,13 @@ def test_fluid_rollouts_per_body_and_in_chunks(default_emitters):
         "exp_midpoint", state, inertia, 0.05, 20, fluid=marked, save_every=5, chunk_steps=10
     )
     np.testing.assert_array_equal(chunked.q, together.q)
-    alone = jaxrot.rollout(
-        "exp_midpoint", jaxrot.RotState(Q0, jnp.zeros(3)), inertia, 0.05, 20, save_every=5,
-        fluid=jaxrot.Fluid.spheroid(0.5, 1.0, 1.0, velocity_gradient=SHEAR),
+    reversed_ = jaxrot.rollout(
+        "exp_midpoint", state, inertia, 0.05, 20, save_every=5,
+        fluid=jaxrot.Fluid.spheroid(aspects[::-1], 1.0, 1.0, velocity_gradient=SHEAR),
     )  # fmt: skip
-    np.testing.assert_allclose(together.q[:, 2], alone.q, atol=1e-15)
+    np.testing.assert_allclose(together.q[:, ::-1], reversed_.q, atol=1e-15)
+    # and the bodies' runs differ (a mix-up would show): aspects 2 and 0.5 part by far more than 1e-3 rad
+    assert float(np_quat.angle_between(np.asarray(together.q[-1, 0]), np.asarray(together.q[-1, 2]))) > 1e-3
 
 
 @pytest.mark.slow

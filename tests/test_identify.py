@@ -139,10 +139,12 @@ def test_unidentifiable_combination_is_named_not_hidden():
 
     truth = {"a": jnp.array(0.4), "b": jnp.array(0.6)}
     state = jaxrot.RotState(jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 0.1, 1.0]))
-    # The record from an eighth-order scheme: the recovered a + b then carries the fitting scheme's
-    # truncation error at dt = 0.05 (6e-10) and not the generator's (rkmk4's: 1.7e-8).
+    # The record from rkmk4 at a quarter of the fit's step: the recovered a + b then carries the fitting
+    # scheme's truncation error at dt = 0.05 (6e-10) and not the generator's (rkmk4's at dt = 0.05:
+    # 1.7e-8; at h/4, 4⁴ = 256 times less, 7e-11). rkmk4's program compiles in a third of rkmk_dopri8's
+    # (4 stages, not 13), which generated this record before at dt = 0.05.
     record = jaxrot.rollout(
-        "rkmk_dopri8", state, jnp.array([1.0, 1.5, 2.0]), 0.05, 200, torque=torque, args=truth, save_every=5
+        "rkmk4", state, jnp.array([1.0, 1.5, 2.0]), 0.0125, 800, torque=torque, args=truth, save_every=20
     )
     experiment = jaxrot.Experiment(record.t, q=record.q, sigma_q=1e-4)
     with pytest.warns(UserWarning, match="do not determine"):
@@ -311,7 +313,7 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(sensors):
     for ``A = [J | r]``, to a backward-stable QR's round-off, a small multiple of ``eps ‖A‖²``
     (1e-13 ‖A‖²_F is 450 eps: the reflections of two QRs of ~150 rows and 17 columns)."""
     from jaxrot._fit._identify._check import check_arguments
-    from jaxrot._fit._identify._jacobian import n_dynamic, residuals_and_jacobian, residuals_jacobian_factor
+    from jaxrot._fit._identify._jacobian import n_dynamic, residuals_jacobian_factor
     from jaxrot._fit._identify._model import n_head, n_own, residuals, states
     from jaxrot._fit._identify._problem import build_problem
     from jaxrot._fit._identify._start import starting_point
@@ -340,12 +342,20 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(sensors):
     phi, model = jnp.asarray(problem.phi0), problem.model
     if sensors is not None:  # off the ideal values, so that every sensor term is exercised
         phi = phi + 0.01 * jnp.sin(jnp.arange(phi.size))
-    r, jac, (q, omega) = jax.jit(residuals_and_jacobian)(phi, model)
-    full = jax.jit(jax.jacfwd(residuals))(phi, model)
+    # Two programs, not five (each compiles in seconds and runs in milliseconds): the one the fit's
+    # step evaluates (`residuals_and_jacobian` is its first three values, sliced), and the reference,
+    # jacfwd of the whole residual vector, whose plain residuals and states are aux outputs of its
+    # primal pass: the forward model, in a program other than the one under test.
+    r, jac, (q, omega), factor = jax.jit(residuals_jacobian_factor)(phi, model)
+
+    def reference(p):
+        values = residuals(p, model)
+        return values, (values, states(p, model))
+
+    full, (r_ref, (q_ref, omega_ref)) = jax.jit(jax.jacfwd(reference, has_aux=True))(phi)
     head, own = n_head(model.layout), n_own(model.layout)
     assert n_dynamic(model.layout) == (6 + 1, 6)
     assert (head, own) == ((6 + 1, 6) if sensors is None else (6 + 1 + 3 + 1 + 3 + 1, 6 + 3))
-    _, _, _, factor = jax.jit(residuals_jacobian_factor)(phi, model)
     both = jnp.concatenate([jac, r[:, None]], axis=1)
     np.testing.assert_allclose(
         factor.T @ factor, both.T @ both, rtol=0, atol=1e-13 * float(jnp.sum(both * both))
@@ -353,11 +363,10 @@ def test_per_experiment_jacobian_is_the_full_forward_jacobian(sensors):
     assert jac.shape == full.shape == (r.size, head + 2 * own)
     # The values ride along as jacfwd's primal, compiled in another program: each of the 20 steps
     # rounds the state by a few eps (~1e-15 rad), whitened by σ = 1e-3: 1e-11 is 10× that margin.
-    np.testing.assert_allclose(r, jax.jit(residuals)(phi, model), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(r, r_ref, rtol=0, atol=1e-11)
     np.testing.assert_allclose(jac, full, rtol=0, atol=1e-11 * float(jnp.max(jnp.abs(full))))
     # The modelled states that ride along (the fit reports them without another program) are the
     # forward model's, to the same 20 steps' round-off (a few eps each, unwhitened: 1e-13).
-    q_ref, omega_ref = jax.jit(states)(phi, model)
     np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-13)
     np.testing.assert_allclose(omega, omega_ref, rtol=0, atol=1e-13)
     # The blocks the rollouts did not compute are the zeros they must be: experiment 0's rows do
