@@ -40,23 +40,28 @@ def identify_speed_table(docs):
     return _table(header, rows) + summary + _provenance("identify_speed_cpu.json", data["machine"])
 
 
+# One fit's columns, shared by the ideal-sensor and real-sensor sysid tables.
+_FIT_HEADER = ("fit", "median wall time [s]", "first call [s]", "relative error", "95 % interval coverage")
+
+
+def _fit_cells(r):
+    return [
+        r["fit"],
+        f"{r['median_s']:.2f}",
+        "—" if r["first_call_s"] is None else f"{r['first_call_s']:.1f}",
+        f"{r['relative_error']:.1e}",
+        f"{r['coverage95']:.2f}",
+    ]
+
+
 def identify_sysid_table(docs):
     """`benchmarks/identify_speed.py`'s comparison with mujoco.sysid on MuJoCo's own telemetry."""
     data = _read(docs, "identify_speed_cpu.json")
     rows = data.get("mujoco")
     if not rows:
         return "*Not measured yet: `benchmarks/identify_speed.py` ran without `mujoco[sysid]`.*"
-    header = ["fit", "median wall time [s]", "first call [s]", "relative error", "95 % interval coverage"]
-    table = [
-        [
-            r["fit"],
-            f"{r['median_s']:.2f}",
-            "—" if r["first_call_s"] is None else f"{r['first_call_s']:.1f}",
-            f"{r['relative_error']:.1e}",
-            f"{r['coverage95']:.2f}",
-        ]
-        for r in rows
-    ]
+    header = list(_FIT_HEADER)
+    table = [_fit_cells(r) for r in rows]
     ours, theirs = rows[0], rows[1]
     summary = (
         f"\n\nOver {ours['seeds']} noise seeds (6 inertia elements each): `jaxrot.identify` "
@@ -75,15 +80,10 @@ def identify_sysid_sensors_table(docs):
         return (
             f"*Not in `docs/identify_speed_cpu.json` yet (written before these rows): `{RERUN}` adds them.*"
         )
-    header = ["fit", "median wall time [s]", "first call [s]", "relative error", "95 % interval coverage"]
-    header.append("sensor flaws left out")
+    header = [*_FIT_HEADER, "sensor flaws left out"]
     table = [
         [
-            r["fit"],
-            f"{r['median_s']:.2f}",
-            "—" if r["first_call_s"] is None else f"{r['first_call_s']:.1f}",
-            f"{r['relative_error']:.1e}",
-            f"{r['coverage95']:.2f}",
+            *_fit_cells(r),
             ", ".join(f"`{name}`" for name in r["left_out"]) or "none",
         ]
         for r in rows
