@@ -21,6 +21,9 @@ class Job(NamedTuple):
     # The docs tables (names in docs/_hooks/tables.py's TABLES) that carry its headline figures:
     # a quick run prints each from its own files beside the published one.
     tables: tuple[str, ...] = ()
+    # Runs under the peers' interpreter (``--peers-python``: Python 3.12 with the newest jax and
+    # jax_md, which excludes jax 0.10.2): its results compare with jax_md or record the newest jax.
+    peers: bool = False
 
 
 # The package code behind the numbers, by concept (see README's layout); each job names the groups

@@ -39,9 +39,10 @@ THERMAL_JOBS = {
         quick_minutes=2,
         tables=("thermal_peers_table",),
         sources=(*BASE, *THERMAL, *FLUID, *DIFFRAX, "benchmarks/thermal_peers.py"),
+        peers=True,
     ),
     # jaxrot.jax_md against jax_md's rigid-body nvt_langevin / nve: temperature per axis against dt, energy
-    # error, cost per body-step (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    # error, cost per body-step (Python 3.12 with jax_md: --peers-python <venv312>/bin/python).
     "jax_md_rigid": Job(
         ("jax_md_cpu.json", "jax_md_cpu.png"),
         ("benchmarks/jax_md_rigid.py",),
@@ -53,9 +54,10 @@ THERMAL_JOBS = {
         quick_minutes=4,
         tables=("jax_md_cost_table",),
         sources=JAX_MD + ("benchmarks/jax_md_rigid.py",),
+        peers=True,
     ),
     # jaxrot.jax_md.brownian against closed forms (Favro per body axis, 2dDt, the Langevin function):
-    # accuracy only (Python 3.12 with jax_md: --python <venv312>/bin/python).
+    # accuracy only (Python 3.12 with jax_md: --peers-python <venv312>/bin/python).
     "jax_md_brownian": Job(
         ("jax_md_brownian.json",),
         ("benchmarks/jax_md_brownian.py",),
@@ -66,5 +68,6 @@ THERMAL_JOBS = {
         quick_minutes=1,
         sources=JAX_MD + ("benchmarks/jax_md_brownian.py",),
         timed=False,
+        peers=True,
     ),
 }

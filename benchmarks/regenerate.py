@@ -12,7 +12,7 @@ one after another in fresh processes, printing its plan with each job's expected
     python benchmarks/regenerate.py --stale             # the results whose measured code has changed
     python benchmarks/regenerate.py --only memory,stability
     python benchmarks/regenerate.py --only fluid_race --quick   # within 10 min, into quick/, not docs/
-    python benchmarks/regenerate.py                     # all of them (about 4 h on 2 cores)
+    python benchmarks/regenerate.py --peers-python <py312 venv>/bin/python   # all of them (~90 min)
 
 ``--stale`` prints nothing and exits 0 when every result measures the code as it is now; otherwise it
 names each stale job, the command that reruns it and the files that changed, and exits 1.
@@ -25,9 +25,11 @@ marked ``timed=False`` (accuracy only) are written either way, with their load r
 The GPU results under ``docs/gpu_h100/`` and ``docs/gpu_h200/`` need a GPU machine: the first were
 made there by hand with the commands of docs/performance.md ("On a GPU"), the second by
 ``benchmarks/gpu.sh``; they are not jobs here. The ``jax_md`` column of the throughput table needs
-``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2); without it the column is
-left out. The ``jax_md_rigid`` job needs ``.[jax_md]`` (Python 3.12); without it, it says so and
-leaves its file as it was: run it with ``--only jax_md_rigid --python <py312 venv>/bin/python``. The
+``pip install -e ".[peers]"`` (Python 3.12: jax-md excludes jax 0.10.2). The jobs marked ``peers``
+(throughput, thermal_peers, jax_md_rigid, jax_md_brownian) run under ``--peers-python`` (default: the
+environment's ``JAXROT_PEERS_PYTHON``, else ``--python``), with this checkout on ``PYTHONPATH`` so that
+interpreter needs no jaxrot install; where it cannot import jax_md the job says so, leaves its files as
+they were and the script exits 1. The
 ``mujoco_free_body`` job needs ``pip install -e ".[mujoco]"``, the ``mjx`` job ``pip install -e ".[mjx]"``
 (without it, it says so and leaves its file as it was). Run from the
 repository root with a clean checkout: a results file made from uncommitted package or benchmark
@@ -36,10 +38,12 @@ code carries ``+dirty`` in its commit (its source hashes still say what it measu
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import _harness
@@ -80,8 +84,12 @@ def run_job(name, job, python, *, quick=False, allow_load=False):
         argv = [python, *(a.replace("{tmp}", tmp) for a in (job.quick if quick else job.argv))]
         print(f"== {name}{' (quick)' if quick else ''}: {' '.join(argv)}", flush=True)
         with _harness.LoadWatch() as watch:
-            subprocess.run(argv, cwd=ROOT, check=True)
+            done = subprocess.run(argv, cwd=ROOT, env=_checkout_env())
         load = watch.record
+        if done.returncode != 0:
+            _restore(before)
+            print(f"== {name}: FAILED (exit {done.returncode}); its files left as they were", flush=True)
+            return False
         if quick:
             out = ROOT / "quick" / name
             shutil.rmtree(out, ignore_errors=True)
@@ -100,11 +108,7 @@ def run_job(name, job, python, *, quick=False, allow_load=False):
             shutil.copy(Path(tmp) / source, DOCS / target)
     busy = job.timed and load["quiet"] is False
     if busy and not allow_load:
-        for target, content in before.items():
-            if content is None:
-                target.unlink(missing_ok=True)
-            else:
-                target.write_bytes(content)
+        _restore(before)
         print(
             f"== {name}: NOT WRITTEN: the rest of the machine used {load['other_cores']} cores on average "
             f"during this timed run (quiet: <= {_harness.QUIET_OTHER_CORES}; load average "
@@ -122,6 +126,33 @@ def run_job(name, job, python, *, quick=False, allow_load=False):
         flush=True,
     )
     return True
+
+
+def _restore(before):
+    """Put each results file back as it was before a job that did not stand (or remove a new one)."""
+    for target, content in before.items():
+        if content is None:
+            target.unlink(missing_ok=True)
+        else:
+            target.write_bytes(content)
+
+
+def _checkout_env():
+    """The environment with this checkout first on PYTHONPATH: an interpreter without jaxrot installed
+    (the peers' Python 3.12) measures this checkout's code, like the default one's editable install."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    return env
+
+
+def interpreter(job, python, peers_python):
+    """The interpreter a job runs under, or ``None`` with a message where its peers are missing."""
+    if not job.peers:
+        return python
+    probe = subprocess.run([peers_python, "-c", "import jax_md"], capture_output=True, env=_checkout_env())
+    if probe.returncode != 0:
+        return None
+    return peers_python
 
 
 def compare_tables(job, quick_docs):
@@ -174,6 +205,11 @@ def main(argv=None):
         "--allow-load", action="store_true", help="write timed results measured beside other computation"
     )
     parser.add_argument("--python", default=sys.executable, help="interpreter for the benchmarks")
+    parser.add_argument(
+        "--peers-python",
+        default=os.environ.get("JAXROT_PEERS_PYTHON"),
+        help="interpreter with jax_md and the newest jax (Python 3.12) for the jobs marked peers",
+    )
     opts = parser.parse_args(argv)
     if opts.list:
         for name, job in JOBS.items():
@@ -193,13 +229,22 @@ def main(argv=None):
                 print(f"    {reason}")
         return 1 if stale else 0
     print_plan(chosen, opts.quick)
-    refused = [
-        n
-        for n in chosen
-        if not run_job(n, JOBS[n], opts.python, quick=opts.quick, allow_load=opts.allow_load)
-    ]
+    refused, started = [], time.monotonic()
+    for name in chosen:
+        job = JOBS[name]
+        python = interpreter(job, opts.python, opts.peers_python or opts.python)
+        if python is None:
+            print(
+                f"== {name}: SKIPPED: needs jax_md (Python 3.12 with the newest jax): pass --peers-python "
+                "<py312 venv>/bin/python or set JAXROT_PEERS_PYTHON; its files left as they were",
+                flush=True,
+            )
+            refused.append(name)
+        elif not run_job(name, job, python, quick=opts.quick, allow_load=opts.allow_load):
+            refused.append(name)
+    print(f"== {len(chosen)} job(s) in {(time.monotonic() - started) / 60:.1f} min", flush=True)
     if refused:
-        print(f"== not written (the machine was busy): {', '.join(refused)}", flush=True)
+        print(f"== not written (failed, skipped or the machine was busy): {', '.join(refused)}", flush=True)
         return 1
     return 0
 

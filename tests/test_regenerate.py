@@ -162,3 +162,34 @@ def test_the_race_jobs_sizing_replayed_on_the_published_race_gives_its_cells(dty
     caps = {flag: float(RACE[RACE.index(flag) + 1]) for flag in ("--time-cap", "--adaptive-cap")}
     _, changed = race_replay.replay(data, dtype, caps["--time-cap"], caps["--adaptive-cap"])
     assert changed == 0, capsys.readouterr().out
+
+
+def test_a_failed_job_leaves_its_files_and_the_run_goes_on(scratch_docs, monkeypatch, capsys):
+    """One job that raises costs the whole run nothing but its own files: the next job still runs."""
+    monkeypatch.setattr(_harness, "LoadWatch", _Watch)
+    failing = scratch_docs._replace(argv=("-c", "raise SystemExit(3)"))
+    monkeypatch.setattr(regenerate, "JOBS", {"bad": failing, "good": scratch_docs})
+    assert regenerate.main([]) == 1
+    out = capsys.readouterr().out
+    assert "bad: FAILED (exit 3)" in out and "not written" in out and "bad" in out.splitlines()[-1]
+    assert json.loads((regenerate.DOCS / "r.json").read_text())["rows"] == [2]  # good ran after it
+
+
+def test_a_peers_job_without_jax_md_is_skipped_saying_how(scratch_docs, monkeypatch, capsys):
+    """A job marked peers runs under --peers-python; an interpreter without jax_md leaves its files."""
+    monkeypatch.setattr(_harness, "LoadWatch", _Watch)
+    monkeypatch.setattr(regenerate, "JOBS", {"p": scratch_docs._replace(peers=True)})
+    # The current interpreter, with an import of jax_md made to fail, stands for Python 3.11's.
+    monkeypatch.setenv("PYTHONPATH", str(_no_jax_md(regenerate.DOCS)))
+    assert regenerate.main(["--peers-python", sys.executable]) == 1
+    assert "p: SKIPPED: needs jax_md" in capsys.readouterr().out
+    assert json.loads((regenerate.DOCS / "r.json").read_text())["rows"] == [1]
+    assert regenerate.interpreter(regenerate.JOBS["p"]._replace(peers=False), "py", "peers") == "py"
+
+
+def _no_jax_md(folder):
+    """A folder whose jax_md package raises ImportError, to put first on PYTHONPATH."""
+    package = folder / "shadow" / "jax_md"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("raise ImportError('no jax_md here')\n")
+    return package.parent
