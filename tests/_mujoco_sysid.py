@@ -166,25 +166,34 @@ class SysidProblem(NamedTuple):
     first_omega: list
 
 
-def sysid_problem(manoeuvres, *, inertia0=INERTIA0, fit_initial_state=True):
-    """The sysid problem of the module docstring, started at ``inertia0`` and the first samples."""
+def _require_sysid():
+    """Raise ImportError where ``mujoco.sysid`` (MuJoCo >= 4.0) is missing."""
     if sysid is None or not hasattr(sysid, "optimize"):
         raise ImportError('mujoco.sysid is not installed: pip install -e ".[mujoco]" (mujoco[sysid] >= 4.0)')
-    spec = mujoco.MjSpec.from_string(model_xml(inertia0))
-    model = spec.compile()
-    theta0 = _theta_of(inertia0)
+
+
+def _inertia_parameter(theta0):
+    """sysid's ``inertia`` parameter (the module docstring): θ's six free entries about ``theta0``, in
+    their box bounds, with a modifier writing θ's tensor as the body's ``fullinertia``."""
 
     def write_inertia(spec, param):
         i = _inertia_of(param.value, theta0)
         spec.body("body").fullinertia = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
 
-    params = sysid.ParameterDict()
     bounds = np.r_[[LOG_STRETCH_BOUND] * 3, [SHEAR_BOUND] * 3]
-    params.add(
-        sysid.Parameter(
-            "inertia", theta0[1:7], theta0[1:7] - bounds, theta0[1:7] + bounds, modifier=write_inertia
-        )
+    return sysid.Parameter(
+        "inertia", theta0[1:7], theta0[1:7] - bounds, theta0[1:7] + bounds, modifier=write_inertia
     )
+
+
+def sysid_problem(manoeuvres, *, inertia0=INERTIA0, fit_initial_state=True):
+    """The sysid problem of the module docstring, started at ``inertia0`` and the first samples."""
+    _require_sysid()
+    spec = mujoco.MjSpec.from_string(model_xml(inertia0))
+    model = spec.compile()
+    theta0 = _theta_of(inertia0)
+    params = sysid.ParameterDict()
+    params.add(_inertia_parameter(theta0))
     sequences, measured_initial_states = _sequences(spec, model, manoeuvres)
     first_q = [m.q[0] for m in manoeuvres]
     first_omega = [m.omega_body[0] for m in manoeuvres]

@@ -35,26 +35,21 @@ import time
 import numpy as np
 from _mujoco_sysid import (
     INERTIA0,
-    LOG_STRETCH_BOUND,
     OMEGA0_BOUND,
-    SHEAR_BOUND,
     SysidProblem,
-    _inertia_of,
+    _inertia_parameter,
     _initial_state_rollout,
     _quat_exp,
     _quat_mul,
+    _require_sysid,
     _sequences,
     _theta_of,
     fit_problem,
+    mujoco,
+    sysid,
 )
 from _mujoco_telemetry import model_xml
 
-
-try:
-    import mujoco
-    from mujoco import sysid
-except ImportError:
-    mujoco = sysid = None
 
 DELAY_BOUND = 0.0095  # s: under the 10 ms between the controls' start and the first sample
 TRACKER_BASE = np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])  # a quarter turn about body z
@@ -90,15 +85,10 @@ def sensor_model_xml(inertia=INERTIA0):
 
 def sysid_sensor_problem(manoeuvres, *, inertia0=INERTIA0):
     """The sysid problem of the module docstring, from ``inertia0``, ideal sensors and the first samples."""
-    if sysid is None or not hasattr(sysid, "optimize"):
-        raise ImportError('mujoco.sysid is not installed: pip install -e ".[mujoco]" (mujoco[sysid] >= 4.0)')
+    _require_sysid()
     spec = mujoco.MjSpec.from_string(sensor_model_xml(inertia0))
     model = spec.compile()
     theta0 = _theta_of(inertia0)
-
-    def write_inertia(spec, param):
-        i = _inertia_of(param.value, theta0)
-        spec.body("body").fullinertia = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
 
     def write_mount(spec, param):
         spec.site("tracker").quat = _quat_mul(_quat_exp(np.asarray(param.value)), TRACKER_BASE)
@@ -108,8 +98,7 @@ def sysid_sensor_problem(manoeuvres, *, inertia0=INERTIA0):
         return sysid.Parameter(name, nominal, nominal - bound, nominal + bound, **kw)
 
     params = sysid.ParameterDict()
-    bounds = np.r_[[LOG_STRETCH_BOUND] * 3, [SHEAR_BOUND] * 3]
-    params.add(box("inertia", theta0[1:7], bounds, modifier=write_inertia))
+    params.add(_inertia_parameter(theta0))
     params.add(box("tracker_mount", np.zeros(3), MOUNT_BOUND, modifier=write_mount))
     params.add(box("gyro_scale", np.ones(3), SCALE_BOUND))
     params.add(box("gyro_delay", 0.0, DELAY_BOUND))
