@@ -11,13 +11,15 @@ Started at rest ("off": a boundary layer of width 1/R) or on its slow manifold (
 `on_manifold`), over t = 4.
 """
 
+import contextlib
+
 import jax
 import jax.numpy as jnp
 
 import jaxrot
 from jaxrot import quaternion as quat
 from jaxrot._fluid._fluid import check_fluid
-from jaxrot.schemes import ExpRK4
+from jaxrot.schemes import ExpRK4, _graded_start
 from jaxrot.schemes._base import advance
 from jaxrot.schemes._exponential import FluidArgs
 
@@ -114,3 +116,27 @@ def final_orientation_runner(scheme, inert, torque, args):
 def errors(run, state, steps, reference):
     """Final orientation errors (rad) of ``run`` at each number of steps over `T_END`."""
     return [float(quat.angle_between(run(state, jnp.asarray(T_END / n), n), reference)) for n in steps]
+
+
+@contextlib.contextmanager
+def counting_substeps():
+    """Within it, the graded start counts its work: yields ``[substeps, graded steps]``, added to by a host
+    callback around each substep and each graded step (not timed; zero it between runs). The counting
+    `_graded_start.graded_step` is read when a run traces ``start_step``: build and first call runners
+    inside; restored on exit."""
+    counts = [0, 0]
+    graded_step = _graded_start.graded_step
+
+    def counting(step, *args):
+        def counted(*a):
+            jax.debug.callback(lambda: counts.__setitem__(0, counts[0] + 1))
+            return step(*a)
+
+        jax.debug.callback(lambda: counts.__setitem__(1, counts[1] + 1))
+        return graded_step(counted, *args)
+
+    _graded_start.graded_step = counting
+    try:
+        yield counts
+    finally:
+        _graded_start.graded_step = graded_step

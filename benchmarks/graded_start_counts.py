@@ -19,40 +19,29 @@ import _fluid_probe as probe  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxrot.schemes import ExpRK4, _graded_start  # noqa: E402
+from jaxrot.schemes import ExpRK4  # noqa: E402
 
 
 STEPS = [40, 80, 160, 320, 640]
-COUNTS = [0, 0]  # substeps, graded steps
-_graded_step = _graded_start.graded_step
-
-
-def _counting(step, *args):
-    def counted(*a):
-        jax.debug.callback(lambda: COUNTS.__setitem__(0, COUNTS[0] + 1))
-        return step(*a)
-
-    jax.debug.callback(lambda: COUNTS.__setitem__(1, COUNTS[1] + 1))
-    return _graded_step(counted, *args)
 
 
 def main(rates):
-    _graded_start.graded_step = _counting  # read when `start_step` is traced
-    for rate in rates:
-        run = probe.runner(ExpRK4(), rate)
-        for kind in ("off", "spin", "on"):
-            state = probe.start(kind, rate)
-            reference = run(state, jnp.asarray(probe.T_END / (16 * STEPS[-1])), 16 * STEPS[-1])
-            errors, extra = [], []
-            for n in STEPS:
-                COUNTS[:] = [0, 0]
-                q = jax.block_until_ready(run(state, jnp.asarray(probe.T_END / n), n))
-                errors.append(float(probe.quat.angle_between(q, reference)))
-                extra.append(f"{COUNTS[0] - COUNTS[1]}/{COUNTS[1]}")
-            slope = np.polyfit(np.log([probe.T_END / n for n in STEPS]), np.log(errors), 1)[0]
-            shown = " ".join(f"{e:.2e}" for e in errors)
-            print(f"ζ/I = {rate:g} {kind:4s} slope {slope:.3f}; errors {shown}; extra substeps/graded steps "
-                  + " ".join(extra), flush=True)  # fmt: skip
+    with probe.counting_substeps() as counts:  # substeps, graded steps
+        for rate in rates:
+            run = probe.runner(ExpRK4(), rate)
+            for kind in ("off", "spin", "on"):
+                state = probe.start(kind, rate)
+                reference = run(state, jnp.asarray(probe.T_END / (16 * STEPS[-1])), 16 * STEPS[-1])
+                errors, extra = [], []
+                for n in STEPS:
+                    counts[:] = [0, 0]
+                    q = jax.block_until_ready(run(state, jnp.asarray(probe.T_END / n), n))
+                    errors.append(float(probe.quat.angle_between(q, reference)))
+                    extra.append(f"{counts[0] - counts[1]}/{counts[1]}")
+                slope = np.polyfit(np.log([probe.T_END / n for n in STEPS]), np.log(errors), 1)[0]
+                shown = " ".join(f"{e:.2e}" for e in errors)
+                row = f"ζ/I = {rate:g} {kind:4s} slope {slope:.3f}; errors {shown}"
+                print(f"{row}; extra substeps/graded steps {' '.join(extra)}", flush=True)
 
 
 if __name__ == "__main__":

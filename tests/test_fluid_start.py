@@ -66,35 +66,24 @@ def test_start_error_falls_at_order_four(rate):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("rate", [1e3, 1e5])
-def test_start_from_rest_costs_what_its_mesh_says(rate, monkeypatch):
+def test_start_from_rest_costs_what_its_mesh_says(rate):
     """From rest, the substeps beyond one per step number about ``5 (L_max/L_min)/(ωh max(1, (θ/λ)^{1/4}))``
     (`jaxrot.schemes._graded_start`: ``ω``, ``λ`` at the start), plus the last substep of each graded
     step cut to end on it: at most 1.25× that and 2 more, at 40 and 640 steps (measured 7 and 89 at
     R = 1e3, 2 and 11 at 1e5; the mesh blind to ``λ`` took 17 and 235, 17 and 233)."""
     from jaxrot.schemes import _graded_start
 
-    counts = [0, 0]  # substeps, graded steps
-    graded_step = _graded_start.graded_step
-
-    def counting(step, *args):
-        def counted(*a):
-            jax.debug.callback(lambda: counts.__setitem__(0, counts[0] + 1))
-            return step(*a)
-
-        jax.debug.callback(lambda: counts.__setitem__(1, counts[1] + 1))
-        return graded_step(counted, *args)
-
-    monkeypatch.setattr(_graded_start, "graded_step", counting)
-    run = probe.runner(ExpRK4(), rate)  # traced here, with the counting substeps
-    state = probe.start("off", rate)
-    inertia = jaxrot.body_inertia(probe.inertia(rate))
-    carry = ExpRK4().in_fluid().init(state, 0.0, inertia, probe.torque, probe.fluid_args())
-    omega = float(jnp.linalg.norm(carry.slow) + jnp.sqrt(jnp.linalg.norm(carry.forcing)))
-    coarsening = max(1.0, (_graded_start._LAYER_TURN / float(carry.layer)) ** 0.25)
-    spread = float(probe.RATE_SHAPE.max() / probe.RATE_SHAPE.min())
-    for n in (STEPS[0], STEPS[-1]):
-        counts[:] = [0, 0]
-        jax.block_until_ready(run(state, jnp.asarray(probe.T_END / n), n))
-        extra = counts[0] - counts[1]
-        model = 5 * spread / (omega * probe.T_END / n * coarsening)
-        assert 0 < extra <= 1.25 * model + 2, (n, extra, model)
+    with probe.counting_substeps() as counts:  # substeps, graded steps
+        run = probe.runner(ExpRK4(), rate)  # traced here, with the counting substeps
+        state = probe.start("off", rate)
+        inertia = jaxrot.body_inertia(probe.inertia(rate))
+        carry = ExpRK4().in_fluid().init(state, 0.0, inertia, probe.torque, probe.fluid_args())
+        omega = float(jnp.linalg.norm(carry.slow) + jnp.sqrt(jnp.linalg.norm(carry.forcing)))
+        coarsening = max(1.0, (_graded_start._LAYER_TURN / float(carry.layer)) ** 0.25)
+        spread = float(probe.RATE_SHAPE.max() / probe.RATE_SHAPE.min())
+        for n in (STEPS[0], STEPS[-1]):
+            counts[:] = [0, 0]
+            jax.block_until_ready(run(state, jnp.asarray(probe.T_END / n), n))
+            extra = counts[0] - counts[1]
+            model = 5 * spread / (omega * probe.T_END / n * coarsening)
+            assert 0 < extra <= 1.25 * model + 2, (n, extra, model)
