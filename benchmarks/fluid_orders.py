@@ -70,19 +70,18 @@ def plain_torque(with_magnet):
     return torque
 
 
+def _final_q(scheme, body_inertia, torque, args, state, dt, n):
+    """The orientation after ``n`` plain `step`s of ``scheme`` from t = 0 (traced in a runner's jit)."""
+    carry = scheme.init(state, jnp.zeros(()), body_inertia, torque, args)
+    step = lambda i, c: scheme.step(c, i * dt, dt, body_inertia, torque, args)  # noqa: E731
+    return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
+
+
 def runner(scheme, body_inertia, torque, args, fluid_values):
     """``run(state, dt, n) -> q``: one compilation for any dt and n."""
     if fluid_values is not None:
         scheme, args = scheme.in_fluid(), FluidArgs(args, fluid_values)
-    body_inertia = jaxrot.body_inertia(body_inertia)
-
-    @jax.jit
-    def run(state, dt, n):
-        carry = scheme.init(state, jnp.zeros(()), body_inertia, torque, args)
-        step = lambda i, c: scheme.step(c, i * dt, dt, body_inertia, torque, args)  # noqa: E731
-        return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
-
-    return run
+    return jax.jit(functools.partial(_final_q, scheme, jaxrot.body_inertia(body_inertia), torque, args))
 
 
 @functools.cache
@@ -94,10 +93,8 @@ def fluid_runner(name, with_magnet):
 
     @jax.jit
     def run(state, moments, args, fluid_values, dt, n):
-        body_inertia, args = jaxrot.body_inertia(moments), FluidArgs(args, fluid_values)
-        carry = scheme.init(state, jnp.zeros(()), body_inertia, torque, args)
-        step = lambda i, c: scheme.step(c, i * dt, dt, body_inertia, torque, args)  # noqa: E731
-        return scheme.state(jax.lax.fori_loop(0, n, step, carry)).q
+        fluid_args = FluidArgs(args, fluid_values)
+        return _final_q(scheme, jaxrot.body_inertia(moments), torque, fluid_args, state, dt, n)
 
     return run
 
