@@ -7,7 +7,9 @@ from typing import NamedTuple
 class Job(NamedTuple):
     files: tuple[str, ...]  # under docs/
     argv: tuple[str, ...]  # after the interpreter
-    minutes: float  # on this project's 2-core CPU, quiet
+    # on this project's 2-core CPU, quiet: each job's time in the whole run of 2026-11-29 (a0834c9, 85.6 min
+    # in all; the comments beside them record how each was sized)
+    minutes: float
     long: bool = False  # past the 10 minutes a rerun during development may take
     # (file in the job's scratch folder ``{tmp}``, file under docs/) copied once the job has run
     copies: tuple[tuple[str, str], ...] = ()

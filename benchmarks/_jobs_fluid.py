@@ -11,7 +11,7 @@ FLUID_JOBS = {
         # One program per scheme and torque for all seven Stokes numbers, one Dopri8 reference per
         # Stokes number and torque for all schemes: 45 CPU-s in all (2026-11-29, load ~18), under a
         # minute on 2 quiet cores.
-        1,
+        0.5,
         quick=("benchmarks/fluid_orders.py", "--quick", "--out", "{tmp}/fluid_orders.json"),
         quick_minutes=0.5,
         tables=("fluid_orders_table",),
@@ -22,14 +22,14 @@ FLUID_JOBS = {
         ("fluid_layer.json",),
         ("benchmarks/fluid_layer.py",),
         # 12 programs (scheme, start rule, rate), each reference once: 58 CPU-s (2026-11-29, load ~18).
-        1,
+        0.7,
         sources=(*BASE, *FLUID, "benchmarks/fluid_layer.py", "benchmarks/_fluid_probe.py"),
         timed=False,
     ),
     "overdamped_cost": Job(
         ("overdamped_cost_cpu.json",),
         ("benchmarks/overdamped_cost.py", "--json", "docs/overdamped_cost_cpu.json"),
-        2,
+        0.4,
         sources=(*BASE, *VACUUM, *FLUID, *SCENES, "benchmarks/overdamped_cost.py"),
     ),
     "fluid_race": Job(
@@ -41,7 +41,7 @@ FLUID_JOBS = {
         # before: 4 runs a rung, 7 rounds of ~19-30 finalists, Kvaerno5 failing at 16384 steps), plus
         # ~3.5 min of compilation (St = 0.1 measured: 195 CPU-s with the runs, 2026-11-29, load ~17).
         ("benchmarks/fluid_race.py", "--repeats", "1", "--time-cap", "2", "--max-steps", "4096"),
-        10,
+        6.7,
         quick=(
             "benchmarks/fluid_race.py",
             "--n",
@@ -75,7 +75,7 @@ FLUID_JOBS = {
     "fluid_step_cost": Job(
         ("fluid_step_cost_cpu.json",),
         ("benchmarks/fluid_step_cost.py", "--json", "docs/fluid_step_cost_cpu.json"),
-        3,
+        0.5,
         quick=(
             "benchmarks/fluid_step_cost.py",
             "--n",

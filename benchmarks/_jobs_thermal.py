@@ -13,7 +13,7 @@ THERMAL_JOBS = {
         # CPU time (user + sys), 2026-11-29 under a load of ~15: 64 s at 2000 bodies, 134 s at 8000, so
         # 41 s + 11.6 ms per body: 273 s at 20000, 2.3 min on 2 quiet cores (4.6 on one).
         ("benchmarks/thermal_orders.py", "--bodies", "20000"),
-        5,
+        2.6,
         quick=("benchmarks/thermal_orders.py", "--bodies", "2000", "--out", "{tmp}/thermal_orders.json"),
         quick_minutes=1,
         tables=("thermal_orders_table",),
@@ -27,7 +27,7 @@ THERMAL_JOBS = {
         # Python 3.12 with jax_md, 2026-11-29 (load ~17): 230 CPU-s in all (the 16 bias rows 142), so
         # 2-4 min on 2 quiet cores (25 were listed).
         ("benchmarks/thermal_peers.py", "--timing"),
-        5,
+        3.1,
         quick=(
             "benchmarks/thermal_peers.py",
             "--bodies",
@@ -48,7 +48,7 @@ THERMAL_JOBS = {
         ("benchmarks/jax_md_rigid.py",),
         # 243 CPU-s (user+sys) in a full run under heavy load (2026-11-29; its temperatures and
         # energies equal the published file's to 1e-13): 2.0 min on 2 quiet cores, 4.1 at one core.
-        4,
+        2.7,
         # The cost table alone (free, interacting, first call), printed.
         quick=("benchmarks/jax_md_rigid.py", "--quick", "--out", "{tmp}/jax_md_cpu.json"),
         quick_minutes=4,
@@ -63,7 +63,7 @@ THERMAL_JOBS = {
         ("benchmarks/jax_md_brownian.py",),
         # One program for the three dipole fields (was three): 244 CPU-s in all, 2026-11-29 (load ~17),
         # the file's numbers unchanged to the last digit: 2-4 min on 2 quiet cores.
-        4,
+        2.2,
         quick=("benchmarks/jax_md_brownian.py", "--quick", "--out", "{tmp}/jax_md_brownian.json"),
         quick_minutes=1,
         sources=JAX_MD + ("benchmarks/jax_md_brownian.py",),

@@ -24,7 +24,7 @@ VACUUM_JOBS = {
     "compare": Job(
         ("compare_heavy_top.json", "compare_heavy_top.png"),
         ("-m", "jaxrot", "compare", "--out", "{tmp}"),
-        4,
+        0.8,
         copies=(("compare.json", "compare_heavy_top.json"), ("compare.png", "compare_heavy_top.png")),
         sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "jaxrot/comparison/_ladder.py", "jaxrot/__main__.py"),
     ),
@@ -37,7 +37,7 @@ VACUUM_JOBS = {
     "race64": Job(
         ("race_cpu/race_float64.json", *(f"race_cpu/race_{scene}_float64.png" for scene in RACE_SCENES)),
         RACE,
-        9.5,
+        7.7,
         # Compiles are most of it at N = 200 (about 100 s of the full run's).
         quick=("benchmarks/race.py", "--n", "200", "--repeats", "1", "--time-cap", "0.5", "--out", "{tmp}"),
         quick_minutes=3,
@@ -51,7 +51,7 @@ VACUUM_JOBS = {
     "race32": Job(
         ("race_cpu/race_float32.json", *(f"race_cpu/race_{scene}_float32.png" for scene in RACE_SCENES)),
         (*RACE, "--dtype", "float32"),
-        4.5,
+        3.1,
         quick=(
             "benchmarks/race.py",
             "--dtype",
@@ -72,7 +72,7 @@ VACUUM_JOBS = {
     "compile": Job(
         ("compile_cpu.json",),
         ("benchmarks/compile.py",),
-        8,
+        4.6,
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/compile.py"),
     ),
     # The first call of jaxrot's public entries and their peers, split into JAX's stages, each cell in a
@@ -115,7 +115,7 @@ VACUUM_JOBS = {
         # each row run 4 times (a warm run and 3 timed; the 10⁶-body rows 53 s of the 83), so about
         # 8 min on quiet cores. Its 10⁶-body rows keep their 10 steps: at 2 steps a run's fixed cost
         # made euler and zhao 2.4-2.6x slower per step (measured under load, interleaved).
-        8,
+        6.2,
         quick=(
             "benchmarks/throughput.py",
             "--n",
@@ -146,7 +146,7 @@ VACUUM_JOBS = {
         # Without the 10⁶-body rows (about half of the throughput job's run time, by its file): the
         # question here is the jax version's ratio, which 10³…10⁵ bodies answer; 10⁶ is the newest
         # jax's (the throughput job's) alone.
-        5,
+        4,
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
     ),
     # The same with XLA's default options instead of jaxrot.compiler_options(): the YNN trap.
@@ -165,13 +165,13 @@ VACUUM_JOBS = {
             "--json",
             "docs/throughput_cpu_jax010_xla_defaults.json",
         ),  # fmt: skip
-        1.5,
+        0.6,
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
     ),
     "memory": Job(
         ("memory_cpu.json",),
         ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"),
-        5,
+        4.3,
         # the heavy_top scene's bodies (throughput.bodies)
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/memory.py", "benchmarks/throughput.py"),
     ),
@@ -179,7 +179,7 @@ VACUUM_JOBS = {
     "stability": Job(
         ("stability_cpu.json",),
         ("benchmarks/stability.py", "--json", "docs/stability_cpu.json"),
-        5,
+        2.7,
         sources=(
             *BASE,
             *VACUUM,
@@ -197,7 +197,7 @@ VACUUM_JOBS = {
         ("benchmarks/energy_growth.py", "--json", "docs/energy_growth.json"),
         # 10.1 min at 0.39 of a core beside 1.61 cores of other work (2026-11-29): 237 core-seconds,
         # so about 4 min on 2 quiet cores (estimated; its programs use one core at a time)
-        5,
+        3.1,
         tables=("energy_limits_table",),
         sources=(
             *BASE,
@@ -216,7 +216,7 @@ VACUUM_JOBS = {
     "order4": Job(
         ("order4.json",),
         ("benchmarks/order4.py", "--json", "docs/order4.json"),
-        9,
+        1.8,
         sources=(*BASE, *VACUUM, *DIFFRAX, *SCENES, "benchmarks/order4.py"),
         timed=False,
     ),
@@ -226,7 +226,7 @@ VACUUM_JOBS = {
         ("benchmarks/float32.py", "--json", "docs/float32_horizon.json"),
         # 106 CPU-s (user+sys) in a run under heavy load (2026-11-29): 0.9 min on 2 quiet cores,
         # 1.8 if it used one core at a time (mostly compiles).
-        2,
+        1.2,
         quick=("benchmarks/float32.py", "--steps", "20000", "--json", "{tmp}/float32_horizon.json"),
         quick_minutes=1,
         tables=("float32_horizon_table",),
@@ -238,7 +238,7 @@ VACUUM_JOBS = {
         ("benchmarks/identify_speed.py", "--json", "docs/identify_speed_cpu.json"),
         # (user+sys)/2: the quiet run of 11:09 (1.67 cores x 303 s) plus the real-sensor rows (4 seeds:
         # at most twice the 169 CPU s that 2 seeds and jaxrot's first call took under load)
-        7,
+        8.2,
         quick=("benchmarks/identify_speed.py", "--quick", "--json", "{tmp}/identify_speed_cpu.json"),
         quick_minutes=4,
         tables=("identify_speed_table", "identify_sysid_table", "identify_sysid_sensors_table"),
@@ -270,7 +270,7 @@ VACUUM_JOBS = {
         # both cores: ~3 min quiet), the paths ~50, jaxrot ~180 with 14 rungs past the 1 s cap that
         # quiet cores would time (3 runs more each); about 7 min quiet, estimated. Its MuJoCo errors
         # equal the published file's at every rung.
-        8,
+        6.3,
         quick=(
             "benchmarks/mujoco_free_body.py",
             "--n",
