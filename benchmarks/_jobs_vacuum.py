@@ -168,6 +168,24 @@ VACUUM_JOBS = {
         0.6,
         sources=(*BASE, *VACUUM, *SCENES, "benchmarks/throughput.py"),
     ),
+    # XLA:CPU's 512-bit vectors against its default 256 (measured, not kept: docs/performance.md).
+    "cpu_vector_width": Job(
+        ("cpu_vector_width.json",),
+        (
+            "benchmarks/cpu_options.py",
+            "--cells",
+            "float64:10000,float64:100000,float32:10000",
+            "--rounds",
+            "5",
+            "--json",
+            "docs/cpu_vector_width.json",
+        ),  # fmt: skip
+        # Compiling dominates (two programs per scheme and cell; a timed run is ~0.1 s): three of the
+        # first file's four cells (10³ bodies, float64, dropped: the 26-Nov file's ratios there,
+        # 0.81-1.14x, lay inside its whole range, 0.79-1.16x), five rounds: a steadier median, cheap.
+        5,
+        sources=(*BASE, *VACUUM, *SCENES, "benchmarks/cpu_options.py", "benchmarks/throughput.py"),
+    ),
     "memory": Job(
         ("memory_cpu.json",),
         ("benchmarks/memory.py", "--json", "docs/memory_cpu.json"),

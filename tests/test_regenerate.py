@@ -193,3 +193,19 @@ def _no_jax_md(folder):
     package.mkdir(parents=True)
     (package / "__init__.py").write_text("raise ImportError('no jax_md here')\n")
     return package.parent
+
+
+def test_every_cpu_results_file_is_a_jobs_measured_from_a_commit_with_its_load():
+    """Each results file under docs/ (the GPU folders aside: no GPU here) is written by a job of
+    regenerate.py, from a committed tree (no ``+dirty``), with the load it was measured under and, for
+    a timed job, quiet cores or the ``allowed`` mark (issue 76: every CPU number reproducible)."""
+    docs = Path(regenerate.DOCS)
+    owner = {f: name for name, job in regenerate.JOBS.items() for f in job.files}
+    for path in sorted(docs.glob("*.json")) + sorted(docs.glob("race_cpu/*.json")):
+        name = str(path.relative_to(docs))
+        assert name in owner, f"docs/{name} is no job's file: add a job to benchmarks/_jobs_*.py"
+        machine = json.loads(path.read_text())["machine"]
+        assert "+dirty" not in machine["commit"], f"docs/{name} was measured from an uncommitted tree"
+        load = machine.get("load")
+        assert load is not None, f"docs/{name} has no load record: rerun it through regenerate.py"
+        assert not regenerate.JOBS[owner[name]].timed or load["quiet"] or load["allowed"], name

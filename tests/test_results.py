@@ -33,7 +33,7 @@ RESULTS = {
         None,
         "python benchmarks/regenerate.py --only throughput_jax010_xla_defaults",
     ),
-    "cpu_vector_width.json": ("scheme", "python benchmarks/cpu_options.py --json docs/cpu_vector_width.json"),
+    "cpu_vector_width.json": ("scheme", "python benchmarks/regenerate.py --only cpu_vector_width"),
     "memory_cpu.json": ("scheme", "python benchmarks/regenerate.py --only memory"),
     "stability_cpu.json": ("scheme", "python benchmarks/regenerate.py --only stability"),
     # Energy and momentum against |ω|Δt over 1e5 steps: every scheme and MJX's integrators.

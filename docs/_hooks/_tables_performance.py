@@ -2,6 +2,7 @@
 XLA options."""
 
 import json
+import statistics
 from pathlib import Path
 
 from _tables_format import _power_of_ten, _provenance, _read, _sig, _table
@@ -212,11 +213,36 @@ def cpu_vector_width_table(docs, name="cpu_vector_width.json"):
     m = data["machine"]
     n_same = sum(r["same_bits"] for r in data["rows"])
     same = f"final states the same bits in {n_same} of {len(data['rows'])} cells"
-    footer = (
-        f"\n\n*From `docs/{name}`: {m['cpu_model']} ({m['cpus']} cores, AVX-512 {m['avx512f']}), "
-        f"Python {m['python']}, jax {m['jax']}; {same}.*"
+    context = f" ({m['cpu_model']}, AVX-512 {m['avx512f']}; {same})"
+    return (
+        _table(["dtype", "N", *schemes], rows) + _provenance(name, m, context) + "\n\n" + _width_summary(data)
     )
-    return _table(["dtype", "N", *schemes], rows) + footer
+
+
+def _width_summary(data):
+    """The sentence under the vector-width table: median, extremes, the schemes that gain everywhere."""
+    ratio = {(r["scheme"], r["dtype"], r["n"]): r["rate_512"] / r["rate_256"] for r in data["rows"]}
+    (lo_scheme, lo_dtype, lo_n), lo = min(ratio.items(), key=lambda kv: kv[1])
+    hi = max(ratio.values())
+    schemes = dict.fromkeys(key[0] for key in ratio)
+    always = [s for s in schemes if all(v > 1 for k, v in ratio.items() if k[0] == s)]
+    gain = ", ".join(
+        f"{s} ({min(v for k, v in ratio.items() if k[0] == s):.2f}–"
+        f"{max(v for k, v in ratio.items() if k[0] == s):.2f}×)"
+        for s in always
+    )
+    differ = [f"{k[0]} {k[1]} {_power_of_ten(k[2])}" for k in ratio if not _same(data, k)]
+    return (
+        f"Median {statistics.median(ratio.values()):.2f}× over the {len(ratio)} cells, from {lo:.2f}× "
+        f"({lo_scheme}, {lo_dtype}, {_power_of_ten(lo_n)} bodies) to {hi:.2f}×; "
+        f"{'gaining in every cell: ' + gain if always else 'no scheme gains in every cell'}. "
+        f"Final states differ in the last bits in {len(differ)} of {len(ratio)} cells"
+        f"{' (' + ', '.join(differ) + ')' if differ else ''}."
+    )
+
+
+def _same(data, key):
+    return next(r["same_bits"] for r in data["rows"] if (r["scheme"], r["dtype"], r["n"]) == key)
 
 
 def gpu_rotor_loop_table(docs, name="gpu_h200/rotor_loop.json"):
