@@ -146,7 +146,8 @@ def _checkout_env():
 
 
 def interpreter(job, python, peers_python):
-    """The interpreter a job runs under, or ``None`` with a message where its peers are missing."""
+    """The interpreter a job runs under: ``python``, or for a job marked peers ``peers_python`` where it
+    imports jax_md (``None`` where it does not: the caller skips the job, saying so)."""
     if not job.peers:
         return python
     probe = subprocess.run([peers_python, "-c", "import jax_md"], capture_output=True, env=_checkout_env())
